@@ -1,0 +1,253 @@
+"""Scenario and sweep specifications, validated with pydantic.
+
+A :class:`Scenario` is everything one Monte Carlo cell needs: terrain, area and
+trajectory, sensor grades, navigation-system initial errors and filter settings.
+Defaults are the paper's (Tables 1-2, Section 4); the area presets (``A``, ``B``,
+``vehicle``) fill in what differs between the paper's runs. Unknown keys are errors.
+
+``Scenario.world_key()`` hashes only what defines the simulated vehicle data (terrain,
+trajectory, sensors, initial navigation errors, noise); cells that share it share
+their random vehicle data (common random numbers). ``cell_key()`` hashes everything.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from tanbench.paperdata import scenario_facts
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+Pos = float  # documentation alias: metres
+
+
+class TerrainSpec(_Strict):
+    """Where the seafloor comes from: the built-in synthetic maps or a bathymetry file."""
+
+    kind: Literal["synthetic", "file"] = "synthetic"
+    seed: int = Field(1, ge=0, description="synthetic seafloor seed")
+    layout: Literal["auto", "paper", "vehicle-run"] = Field(
+        "auto", description="synthetic layout; auto = 'vehicle-run' for area vehicle, else 'paper'")
+    truth_resolution_m: float = Field(2.5, gt=0, le=10, description="synthetic truth grid spacing")
+    map_error_m: float = Field(0.4, ge=0, description="std of the navigation map's node errors")
+    path: str | list[str] | None = Field(None, description="bathymetry file(s), kind=file")
+    format: Literal["geotiff", "netcdf", "esri-ascii", "npy", "npz"] | None = None
+    bounds: tuple[float, float, float, float] | None = Field(
+        None, description="(west, east, south, north) of a file without georeferencing")
+    origin: tuple[float, float] | None = Field(None, description="(e0, n0) of node [0, 0], metres")
+    resolution: float | tuple[float, float] | None = Field(None, description="grid spacing, metres")
+    rows: Literal["auto", "south_to_north", "north_to_south"] = "auto"
+    crs: Literal["projected", "geographic", "epsg3857"] | None = None
+    nodata: float | None = None
+    fill_holes: bool = Field(False, description="fill no-data holes instead of rejecting the map")
+
+    @model_validator(mode="after")
+    def _file_needs_path(self):
+        if self.kind == "file" and not self.path:
+            raise ValueError("terrain kind 'file' needs a 'path'")
+        return self
+
+
+class TrajectorySpec(_Strict):
+    """The vehicle's true path. ``auto`` follows the area: the paper's run or the vehicle run."""
+
+    kind: Literal["auto", "paper", "vehicle-run", "survey"] = "auto"
+    start_enu_m: tuple[float, float, float] | None = Field(
+        None, description="start (east, north, up); default from the area")
+    speed_mps: float = Field(2.0, gt=0, le=20)
+    legs: int = Field(4, ge=1, le=100)
+    leg_spacing_m: float = Field(80.0, gt=0)
+    leg_length_m: float | None = Field(None, gt=0, description="None = fill the cruise time")
+    first_turn: Literal["left", "right"] = "left"
+    dive_pitch_rate_deg_s: float = Field(0.1, ge=0, le=2)
+    cruise_s: float = Field(840.0, gt=0)
+    # survey (arbitrary maps): a lawn-mower placed by centre and heading
+    centre_en_m: tuple[float, float] | None = None
+    heading_deg: float = 0.0
+    depth_m: float = Field(30.0, ge=0)
+
+
+class SensorSpec(_Strict):
+    """Sensor grades and error models (Table 1 by default; ``grade: table8`` for the vehicle run)."""
+
+    grade: Literal["auto", "table1", "table8"] = "auto"
+    imu_rate_hz: float = Field(100.0, gt=0, le=1000)
+    latitude_deg: float = Field(30.0, ge=-80, le=80)
+    gyro_turn_on_bias_deg_h: float | None = Field(None, ge=0)
+    gyro_bias_instability_deg_h: float | None = Field(None, ge=0)
+    gyro_bias_corr_time_s: float = Field(300.0, gt=0)
+    gyro_arw_deg_sqrt_h: float | None = Field(None, ge=0)
+    accel_turn_on_bias_mg: float | None = Field(None, ge=0)
+    accel_bias_instability_mg: float | None = Field(None, ge=0)
+    accel_bias_corr_time_s: float = Field(300.0, gt=0)
+    accel_noise_mg_sqrt_hz: float | None = Field(None, ge=0)
+    dvl_scale_error: float = Field(0.004, ge=0, lt=0.5)
+    dvl_noise_mps: float = Field(0.002, ge=0)
+    beam_tilt_deg: float = Field(30.0, gt=0, lt=60)
+    beam_azimuths_deg: tuple[float, ...] = Field((0.0, 90.0, 180.0, 270.0), min_length=1)
+    dvl_beamwidth_deg: float = Field(4.0, ge=0, lt=30)
+    altimeter_beamwidth_deg: float = Field(2.1, ge=0, lt=30)
+    beam_footprint: bool = Field(False, description="model the beam width (first return in the cone)")
+    sonar_rate_hz: float = Field(1.0, gt=0, le=20)
+    max_range_m: float = Field(200.0, gt=0)
+    pressure_error_percent: float = Field(0.01, ge=0)
+    pressure_full_scale_m: float = Field(200.0, gt=0)
+
+    def resolved(self, default_grade: str) -> "SensorSpec":
+        """This spec with ``grade: auto`` replaced and unset error figures taken from the grade."""
+        grade = self.grade if self.grade != "auto" else default_grade
+        presets = SENSOR_GRADES[grade]
+        update = {k: v for k, v in presets.items() if getattr(self, k) is None}
+        update["grade"] = grade
+        return self.model_copy(update=update)
+
+
+# Table 1 (the AUV's low-cost SINS) and Table 8 (the test vehicle's IMU). Table 8 gives one
+# "drift" figure for the gyros; tanbench uses it for both the turn-on bias and the in-run
+# instability, and Table 8's accelerometer "bias error" likewise.
+SENSOR_GRADES = {
+    "table1": dict(gyro_turn_on_bias_deg_h=30.0, gyro_bias_instability_deg_h=25.0,
+                   gyro_arw_deg_sqrt_h=2.0, accel_turn_on_bias_mg=50.0,
+                   accel_bias_instability_mg=0.2, accel_noise_mg_sqrt_hz=0.5),
+    "table8": dict(gyro_turn_on_bias_deg_h=1.0, gyro_bias_instability_deg_h=1.0,
+                   gyro_arw_deg_sqrt_h=0.1, accel_turn_on_bias_mg=0.2,
+                   accel_bias_instability_mg=0.2, accel_noise_mg_sqrt_hz=0.2),
+}
+
+
+class NavigationSpec(_Strict):
+    """The navigation system's (INS / dead reckoning) initial errors and levelling."""
+
+    initial_heading_error_deg: float | None = Field(None, ge=-180, le=180)
+    initial_position_error_m: float | None = Field(
+        None, ge=0, description="side of the square of uniform initial horizontal error")
+    level_window_s: float = Field(1.0, ge=0.01, le=60)
+    level_compensation: bool = Field(True, description="remove omega x v from the specific force")
+
+
+class FilterSpec(_Strict):
+    """Particle-filter settings (Table 2 as read in docs/model.md)."""
+
+    initial_area_m: float = Field(150.0, gt=0, description="side of the uniform initial square")
+    initial_std_up_m: float = Field(0.1, ge=0)
+    initial_std_pitch_roll_deg: float = Field(0.1, ge=0)
+    initial_std_heading_deg: float = Field(30.0, ge=0)
+    initial_std_gyro_bias_deg_h: float = Field(25.0, ge=0)
+    process_noise_velocity_mps: float = Field(0.1, ge=0)
+    process_noise_up_m: float = Field(0.01, ge=0)
+    process_noise_attitude_deg_sqrt_h: float = Field(2.0, ge=0)
+    measurement_noise_distance_m: float = Field(0.1, gt=0)
+    measurement_noise_altitude_m: float = Field(1.0, gt=0)
+    distance_innovation: Literal["particle", "navigation", "none"] = "particle"
+    resampling: Literal["systematic", "multinomial", "stratified", "residual"] = "systematic"
+    ess_threshold: float = Field(0.5, gt=0, le=1, description="resample when ESS < threshold * N")
+    roughening: float = Field(0.2, ge=0, description="Gordon roughening constant K for the biases")
+    min_spread_m: float = Field(2.0, ge=0, description="cloud std below which positions are re-spread")
+    divergence_sigma: float = Field(4.0, gt=0, description="RMS innovation (in sigmas) meaning divergence")
+    divergence_steps: int = Field(10, ge=1)
+    outside_map_sigma: float = Field(5.0, gt=0, description="innovation charged to a beam off the map")
+    loose_converged_std_m: float = Field(10.0, gt=0, description="loose filter: std for a position fix")
+    convergence_threshold_m: float = Field(20.0, gt=0)
+    divergence_threshold_m: float = Field(75.0, gt=0)
+
+
+class Scenario(_Strict):
+    """One Monte Carlo cell: everything but the method and the run index."""
+
+    terrain: TerrainSpec = TerrainSpec()
+    area: Literal["A", "B", "vehicle", "custom"] = "A"
+    map_resolution_m: float = Field(10.0, gt=0)
+    noise_m: float = Field(1.0, ge=0, description="half-width of the uniform range noise")
+    sampling_time_s: float = Field(1.0, gt=0)
+    particles: int = Field(3000, gt=0, le=1_000_000)
+    duration_s: float | None = Field(None, gt=0, description="cut the run short (default: whole plan)")
+    trajectory: TrajectorySpec = TrajectorySpec()
+    sensors: SensorSpec = SensorSpec()
+    navigation: NavigationSpec = NavigationSpec()
+    filter: FilterSpec = FilterSpec()
+
+    @model_validator(mode="after")
+    def _resolve_area(self):
+        facts = scenario_facts()
+        vehicle = self.area == "vehicle"
+        if self.terrain.kind == "synthetic" and self.terrain.layout == "auto":
+            object.__setattr__(self, "terrain", self.terrain.model_copy(
+                update={"layout": "vehicle-run" if vehicle else "paper"}))
+        traj = self.trajectory
+        if traj.kind == "auto":
+            kind = "vehicle-run" if vehicle else ("survey" if self.area == "custom" else "paper")
+            traj = traj.model_copy(update={"kind": kind})
+        if traj.start_enu_m is None and traj.kind != "survey":
+            if vehicle:
+                start = tuple(facts["vehicle_test"]["start_enu_m"]) + (0.0,)
+            elif self.area in ("A", "B"):
+                start = tuple(facts["areas"][self.area]["start_enu_m"])
+            else:
+                raise ValueError("area 'custom' with a paper trajectory needs trajectory.start_enu_m")
+            traj = traj.model_copy(update={"start_enu_m": tuple(float(x) for x in start)})
+        if traj.kind == "survey" and traj.centre_en_m is None:
+            raise ValueError("a survey trajectory needs trajectory.centre_en_m")
+        object.__setattr__(self, "trajectory", traj)
+        object.__setattr__(self, "sensors", self.sensors.resolved("table8" if vehicle else "table1"))
+        nav = self.navigation
+        updates = {}
+        if nav.initial_heading_error_deg is None:
+            updates["initial_heading_error_deg"] = 3.0 if vehicle else float(
+                facts["sensors"]["initial_heading_error_deg"])
+        if nav.initial_position_error_m is None:
+            updates["initial_position_error_m"] = 2 * 10.0 if vehicle else float(
+                facts["trajectory"]["initial_horizontal_error_area_m"][0])
+        if updates:
+            object.__setattr__(self, "navigation", nav.model_copy(update=updates))
+        ping = 1.0 / self.sensors.sonar_rate_hz
+        steps = self.sampling_time_s / ping
+        if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
+            raise ValueError(
+                f"sampling_time_s ({self.sampling_time_s:g}) must be a whole number of sonar pings "
+                f"({ping:g} s at sensors.sonar_rate_hz={self.sensors.sonar_rate_hz:g})")
+        if self.map_resolution_m < (self.terrain.truth_resolution_m if self.terrain.kind == "synthetic" else 0):
+            raise ValueError(
+                f"map_resolution_m ({self.map_resolution_m:g}) is finer than the truth grid "
+                f"({self.terrain.truth_resolution_m:g} m)")
+        return self
+
+    # ---- keys -------------------------------------------------------------------
+    def normalized(self) -> dict:
+        """The fully resolved spec as plain JSON-able data (the identity of a cell)."""
+        return json.loads(self.model_dump_json())
+
+    def world_spec(self) -> dict:
+        """What defines the simulated vehicle data of a run (not the filter's settings)."""
+        d = self.normalized()
+        return {k: d[k] for k in ("terrain", "area", "trajectory", "sensors", "navigation", "duration_s")}
+
+    def world_key(self) -> str:
+        return stable_hash(self.world_spec())
+
+    def cell_key(self) -> str:
+        return stable_hash(self.normalized())
+
+
+def stable_hash(data) -> str:
+    """A short, stable hex digest of JSON-able data (sorted keys)."""
+    blob = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def flatten(d: dict, prefix: str = "") -> dict:
+    """{'a': {'b': 1}} -> {'a.b': 1}; lists and tuples stay values."""
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out

@@ -1,0 +1,1 @@
+"""The vehicle's own navigation system (SINS levelling + gyro heading + DVL dead reckoning)."""

@@ -1,0 +1,95 @@
+"""What happened between two filter updates, summarised once for every particle.
+
+The particle filter runs every ``sampling_time`` seconds while the navigation system
+runs at 100 Hz. A particle j differs from the navigation system by a heading offset
+delta_j and by its own gyro-bias estimates (eps_x, eps_z). Over the interval its
+heading is psi_nav(t) + delta_j + eps_x Sx(t) - eps_z Sz(t) (Eq. 1's yaw row, with
+Sx = int sin(roll)/cos(pitch) dt and Sz = int cos(roll)/cos(pitch) dt since the
+interval start), so its displacement is, to first order in the small bias term,
+
+    d_j = Rz(delta_j) [D0 + eps_x J Ax - eps_z J Az],   J = [[0, -1], [1, 0]],
+
+with D0 the navigation system's displacement and Ax = sum_i Sx(t_i) d_i,
+Az = sum_i Sz(t_i) d_i over its 100 Hz steps d_i. These few numbers per interval let
+every particle integrate the whole 100 Hz history at the cost of one rotation; the
+neglected second-order term is below (eps * T)^2 * |D0| / 2, under a millimetre for
+T = 10 s at 55 deg/h.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+# columns of the increments table
+D0E, D0N, JAXE, JAXN, JAZE, JAZN, SX, SZ, DYAW, DPITCH, DROLL, DUP = range(12)
+N_INCREMENTS = 12
+
+
+@nb.njit(cache=True)
+def interval_increments(dt, pos, pitch, roll, yaw, update_idx, out):
+    """Fill ``out`` (K, 12) for the K intervals between consecutive ``update_idx`` samples."""
+    for m in range(update_idx.shape[0] - 1):
+        k0 = update_idx[m]
+        k1 = update_idx[m + 1]
+        sx = 0.0
+        sz = 0.0
+        axe = axn = aze = azn = 0.0
+        for i in range(k0, k1):
+            # heading-rate sensitivities, trapezoid over the step; value at the step's middle
+            rx0 = math.sin(roll[i]) / math.cos(pitch[i])
+            rz0 = math.cos(roll[i]) / math.cos(pitch[i])
+            rx1 = math.sin(roll[i + 1]) / math.cos(pitch[i + 1])
+            rz1 = math.cos(roll[i + 1]) / math.cos(pitch[i + 1])
+            mx = sx + 0.25 * dt * (rx0 + rx1)
+            mz = sz + 0.25 * dt * (rz0 + rz1)
+            de = pos[i + 1, 0] - pos[i, 0]
+            dn = pos[i + 1, 1] - pos[i, 1]
+            axe += mx * de
+            axn += mx * dn
+            aze += mz * de
+            azn += mz * dn
+            sx += 0.5 * dt * (rx0 + rx1)
+            sz += 0.5 * dt * (rz0 + rz1)
+        out[m, D0E] = pos[k1, 0] - pos[k0, 0]
+        out[m, D0N] = pos[k1, 1] - pos[k0, 1]
+        out[m, JAXE] = -axn
+        out[m, JAXN] = axe
+        out[m, JAZE] = -azn
+        out[m, JAZN] = aze
+        out[m, SX] = sx
+        out[m, SZ] = sz
+        out[m, DYAW] = yaw[k1] - yaw[k0]
+        out[m, DPITCH] = pitch[k1] - pitch[k0]
+        out[m, DROLL] = roll[k1] - roll[k0]
+        out[m, DUP] = pos[k1, 2] - pos[k0, 2]
+
+
+def compute_increments(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:
+    """The (K, 12) increments table for the intervals between ``update_idx`` samples."""
+    update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
+    out = np.empty((max(update_idx.size - 1, 0), N_INCREMENTS))
+    interval_increments(dt, np.ascontiguousarray(pos), np.ascontiguousarray(pitch),
+                        np.ascontiguousarray(roll), np.ascontiguousarray(yaw), update_idx, out)
+    return out
+
+
+def increments_numpy(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:
+    """Plain-numpy reference of :func:`compute_increments` (vectorised per interval)."""
+    out = np.empty((len(update_idx) - 1, N_INCREMENTS))
+    rx = np.sin(roll) / np.cos(pitch)
+    rz = np.cos(roll) / np.cos(pitch)
+    for m, (k0, k1) in enumerate(zip(update_idx[:-1], update_idx[1:])):
+        stepx = 0.5 * dt * (rx[k0:k1] + rx[k0 + 1:k1 + 1])
+        stepz = 0.5 * dt * (rz[k0:k1] + rz[k0 + 1:k1 + 1])
+        mx = np.concatenate([[0.0], np.cumsum(stepx)[:-1]]) + 0.5 * stepx
+        mz = np.concatenate([[0.0], np.cumsum(stepz)[:-1]]) + 0.5 * stepz
+        d = np.diff(pos[k0:k1 + 1, :2], axis=0)
+        ax = mx @ d
+        az = mz @ d
+        out[m] = [pos[k1, 0] - pos[k0, 0], pos[k1, 1] - pos[k0, 1], -ax[1], ax[0], -az[1], az[0],
+                  stepx.sum(), stepz.sum(), yaw[k1] - yaw[k0], pitch[k1] - pitch[k0],
+                  roll[k1] - roll[k0], pos[k1, 2] - pos[k0, 2]]
+    return out

@@ -1,0 +1,1 @@
+"""The vehicle's sensors (Table 1): IMU, DVL velocity and beam ranges, altimeter, pressure."""

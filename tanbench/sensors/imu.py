@@ -1,0 +1,55 @@
+"""IMU error model (Table 1): gyros and accelerometers at the IMU rate.
+
+Each axis' error is: a turn-on bias, constant over the run, drawn uniformly in
++-spec (Table 1 prints it as "+-30 deg/h", "+-50 mg"); an in-run bias following a
+first-order Gauss-Markov process with steady-state std ``instability`` and
+correlation time ``tau``; and white noise. White noise of density ND (deg/sqrt(h)
+for the gyro's angle random walk, mg/sqrt(Hz) for the accelerometer) gives a
+per-sample std ND * sqrt(rate) in rate units (ND / sqrt(dt)).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+DEG_PER_H = math.pi / 180.0 / 3600.0  # rad/s
+DEG_PER_SQRT_H = math.pi / 180.0 / 60.0  # rad/sqrt(s)
+MG = 9.80665e-3  # m/s^2
+
+
+@dataclass
+class ImuErrors:
+    """The drawn error processes (for diagnostics): biases per sample, (n, 3) each."""
+
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+
+
+def gauss_markov(n: int, dt: float, sigma: float, tau: float, rng, axes: int = 3) -> np.ndarray:
+    """First-order Gauss-Markov samples (n, axes), stationary from the start."""
+    a = math.exp(-dt / tau)
+    w = rng.standard_normal((n, axes)) * sigma * math.sqrt(1.0 - a * a)
+    w[0] = rng.standard_normal(axes) * sigma
+    return lfilter([1.0], [1.0, -a], w, axis=0)
+
+
+def measure_imu(omega_ib, f_body, dt, sensors, rng):
+    """Gyro (rad/s) and accelerometer (m/s^2) outputs and the errors drawn, (n, 3) each."""
+    n = omega_ib.shape[0]
+    rate = 1.0 / dt
+    g_turn_on = rng.uniform(-1, 1, 3) * sensors.gyro_turn_on_bias_deg_h * DEG_PER_H
+    g_in_run = gauss_markov(n, dt, sensors.gyro_bias_instability_deg_h * DEG_PER_H,
+                            sensors.gyro_bias_corr_time_s, rng)
+    g_noise = rng.standard_normal((n, 3)) * sensors.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(rate)
+    a_turn_on = rng.uniform(-1, 1, 3) * sensors.accel_turn_on_bias_mg * MG
+    a_in_run = gauss_markov(n, dt, sensors.accel_bias_instability_mg * MG, sensors.accel_bias_corr_time_s, rng)
+    a_noise = rng.standard_normal((n, 3)) * sensors.accel_noise_mg_sqrt_hz * MG * math.sqrt(rate)
+    gyro_bias = g_turn_on + g_in_run
+    accel_bias = a_turn_on + a_in_run
+    gyro = omega_ib + gyro_bias + g_noise
+    accel = f_body + accel_bias + a_noise
+    return gyro, accel, ImuErrors(gyro_bias=gyro_bias, accel_bias=accel_bias)

@@ -1,0 +1,171 @@
+"""One Monte Carlo run's vehicle data: truth, sensor measurements and navigation solution.
+
+Everything here depends only on the scenario's *world* (terrain, trajectory, sensors,
+initial navigation errors; see ``Scenario.world_spec``) and on the run's seed, never on
+the filter: the three methods of a run, and cells that differ only in filter settings,
+take the same :class:`VehicleData` (common random numbers). Each sensor draws from its
+own named stream of the run's ``SeedSequence``, so adding a sensor never shifts another's
+random numbers. The truth and the noise-free sonar ranges are deterministic per world
+and cached per process.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from tanbench.config import Scenario
+from tanbench.errors import TanbenchError
+from tanbench.navigation.ins import run_strapdown
+from tanbench.sensors.dvl import measure_velocity
+from tanbench.sensors.imu import ImuErrors, measure_imu
+from tanbench.sensors.pressure import measure_depth
+from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
+from tanbench.terrain import truth_map
+from tanbench.vehicle.trajectory import MotionPlan, Truth, paper_plan, simulate_truth, survey_plan, vehicle_run_plan
+
+# named random streams of a run (spawn-key suffixes)
+STREAM_INITIAL, STREAM_IMU, STREAM_DVL_VELOCITY, STREAM_DVL_RANGES, STREAM_SBE_RANGES, STREAM_PRESSURE = range(6)
+MIN_ALTITUDE_M = 1.0
+
+
+@dataclass
+class NavSolution:
+    """The navigation system's estimate at every IMU sample."""
+
+    pos: np.ndarray
+    pitch: np.ndarray
+    roll: np.ndarray
+    yaw: np.ndarray
+
+
+@dataclass
+class VehicleData:
+    """Everything the filters may use (sensors, navigation) plus the truth to score them."""
+
+    truth: Truth
+    gyro: np.ndarray
+    accel: np.ndarray
+    imu_errors: ImuErrors
+    dvl_velocity: np.ndarray
+    dvl_scale_error: float
+    depth: np.ndarray
+    ping_idx: np.ndarray  # IMU sample index of each sonar ping
+    dvl_beams: np.ndarray  # (4, 3) body-frame unit vectors
+    sbe_beams: np.ndarray  # (1, 3)
+    dvl_ranges: np.ndarray  # (pings, 4) measured ranges, NaN = no bottom
+    sbe_ranges: np.ndarray  # (pings, 1)
+    nav: NavSolution
+    initial_position_error: np.ndarray  # (2,) nav - truth at t=0, m
+    initial_heading_error_deg: float
+
+
+def motion_plan(scenario: Scenario) -> MotionPlan:
+    """The true path of a scenario."""
+    tr = scenario.trajectory
+    if tr.kind == "paper":
+        plan = paper_plan(tr.start_enu_m, tr.speed_mps, tr.legs, tr.leg_spacing_m, tr.leg_length_m,
+                          tr.first_turn, tr.dive_pitch_rate_deg_s, tr.cruise_s)
+    elif tr.kind == "vehicle-run":
+        plan = vehicle_run_plan(tr.start_enu_m, tr.speed_mps, legs=3, leg_spacing=tr.leg_spacing_m,
+                                first_turn=tr.first_turn)
+    else:
+        plan = survey_plan(tr.centre_en_m, tr.heading_deg,
+                           tr.leg_length_m if tr.leg_length_m is not None else 400.0,
+                           tr.leg_spacing_m, tr.legs, tr.depth_m, tr.speed_mps)
+    if scenario.duration_s is not None:
+        plan = _cut(plan, scenario.duration_s)
+    return plan
+
+
+def _cut(plan: MotionPlan, duration: float) -> MotionPlan:
+    ends = np.cumsum(plan.durations)
+    keep = np.searchsorted(ends, duration - 1e-9) + 1
+    durations = plan.durations[:keep].copy()
+    durations[-1] -= ends[keep - 1] - duration if ends[keep - 1] > duration else 0.0
+    return MotionPlan(plan.start_enu, plan.speed, plan.yaw0, durations, plan.pitch_rates[:keep],
+                      plan.yaw_rates[:keep], plan.pitch0)
+
+
+def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> VehicleData:
+    """Simulate one run's vehicle data for ``scenario`` from the run's ``seed``."""
+    world_json = json.dumps(scenario.world_spec(), sort_keys=True)
+    truth, ping_idx, dvl_true, sbe_true = _noise_free_world(world_json)
+    s = scenario.sensors
+
+    def stream(k):
+        return np.random.default_rng(np.random.SeedSequence(seed.entropy, spawn_key=tuple(seed.spawn_key) + (k,)))
+
+    gyro, accel, imu_errors = measure_imu(truth.omega_ib, truth.f_body, truth.dt, s, stream(STREAM_IMU))
+    dvl_velocity, scale = measure_velocity(truth.vel_body, ping_idx, s.dvl_scale_error, s.dvl_noise_mps,
+                                           stream(STREAM_DVL_VELOCITY))
+    depth = measure_depth(truth.pos[:, 2], s.pressure_error_percent, s.pressure_full_scale_m,
+                          stream(STREAM_PRESSURE))
+    dvl_ranges = measure_ranges(dvl_true, scenario.noise_m, stream(STREAM_DVL_RANGES))
+    sbe_ranges = measure_ranges(sbe_true, scenario.noise_m, stream(STREAM_SBE_RANGES))
+
+    nav_cfg = scenario.navigation
+    init = stream(STREAM_INITIAL)
+    pos_err = init.uniform(-0.5, 0.5, 2) * nav_cfg.initial_position_error_m
+    yaw_err = -math.radians(nav_cfg.initial_heading_error_deg)  # heading is -yaw
+    pos, pitch, roll, yaw = run_strapdown(
+        truth.dt, gyro, accel, dvl_velocity, depth, truth.pos[0, :2] + pos_err,
+        truth.yaw[0] + yaw_err, truth.latitude_rad, nav_cfg.level_window_s, nav_cfg.level_compensation)
+    return VehicleData(
+        truth=truth, gyro=gyro, accel=accel, imu_errors=imu_errors, dvl_velocity=dvl_velocity,
+        dvl_scale_error=scale, depth=depth, ping_idx=ping_idx,
+        dvl_beams=dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg), sbe_beams=altimeter_beam_vectors(),
+        dvl_ranges=dvl_ranges, sbe_ranges=sbe_ranges, nav=NavSolution(pos, pitch, roll, yaw),
+        initial_position_error=pos_err, initial_heading_error_deg=nav_cfg.initial_heading_error_deg)
+
+
+@lru_cache(maxsize=4)
+def _noise_free_world(world_json: str):
+    """Truth at the IMU rate, ping indices and noise-free DVL/SBE ranges (cached per world)."""
+    world = json.loads(world_json)
+    scenario = Scenario(**world)
+    s = scenario.sensors
+    plan = motion_plan(scenario)
+    truth = simulate_truth(plan, s.imu_rate_hz, s.latitude_deg)
+    tmap = truth_map(scenario.terrain)
+    check_track_on_map(truth, tmap)
+    ping_step = int(round(s.imu_rate_hz / s.sonar_rate_hz))
+    ping_idx = np.arange(0, truth.t.size, ping_step)
+    p = truth.pos[ping_idx]
+    args = (p, truth.pitch[ping_idx], truth.roll[ping_idx], truth.yaw[ping_idx])
+    bw = s.beam_footprint
+    dvl = true_ranges(tmap, *args, dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg),
+                      s.dvl_beamwidth_deg if bw else 0.0, s.max_range_m)
+    sbe = true_ranges(tmap, *args, altimeter_beam_vectors(), s.altimeter_beamwidth_deg if bw else 0.0,
+                      s.max_range_m)
+    for arr in (truth.pos, truth.pitch, truth.yaw, dvl, sbe, ping_idx):
+        arr.setflags(write=False)
+    return truth, ping_idx, dvl, sbe
+
+
+def check_track_on_map(truth: Truth, tmap) -> None:
+    """Refuse a track that leaves the map, crosses a hole or runs into the seafloor."""
+    e, n, u = truth.pos[::10, 0], truth.pos[::10, 1], truth.pos[::10, 2]
+    t = truth.t[::10]
+    inside = tmap.contains(e, n)
+    if not inside.all():
+        k = int(np.argmin(inside))
+        raise TanbenchError(
+            f"the trajectory leaves the map at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, {n[k]:.0f}) m; "
+            f"the map spans E {tmap.e0:.0f}..{tmap.e_max:.0f}, N {tmap.n0:.0f}..{tmap.n_max:.0f} m")
+    floor = tmap.elevation(e, n)
+    if np.isnan(floor).any():
+        k = int(np.argmax(np.isnan(floor)))
+        raise TanbenchError(
+            f"the map has no data (a hole) under the track at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, "
+            f"{n[k]:.0f}) m; set terrain.fill_holes: true to fill holes")
+    clearance = u - floor
+    if clearance.min() < MIN_ALTITUDE_M:
+        k = int(np.argmin(clearance))
+        raise TanbenchError(
+            f"the vehicle runs into the seafloor at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, {n[k]:.0f}) m: "
+            f"depth {-u[k]:.1f} m over a {-floor[k]:.1f} m seafloor; raise the trajectory or move it")

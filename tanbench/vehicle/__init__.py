@@ -1,0 +1,1 @@
+"""The vehicle's true motion: attitude conventions and trajectories."""
