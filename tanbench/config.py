@@ -148,11 +148,17 @@ class FilterSpec(_Strict):
     distance_innovation: Literal["particle", "navigation", "none"] = "particle"
     resampling: Literal["systematic", "multinomial", "stratified", "residual"] = "systematic"
     ess_threshold: float = Field(0.5, gt=0, le=1, description="resample when ESS < threshold * N")
-    roughening: float = Field(0.2, ge=0, description="Gordon roughening constant K for the biases")
+    regularisation: Literal["liu-west", "gordon", "none"] = Field(
+        "liu-west", description="jitter after resampling: Liu-West shrinkage kernel or Gordon roughening")
+    regularised_states: Literal["position-heading-biases", "biases"] = "position-heading-biases"
+    regularisation_h: float = Field(0.1, gt=0, lt=1, description="Liu-West kernel width h")
+    roughening: float = Field(0.2, ge=0, description="Gordon roughening constant K")
     min_spread_m: float = Field(2.0, ge=0, description="cloud std below which positions are re-spread")
     divergence_sigma: float = Field(4.0, gt=0, description="RMS innovation (in sigmas) meaning divergence")
     divergence_steps: int = Field(10, ge=1)
     outside_map_sigma: float = Field(5.0, gt=0, description="innovation charged to a beam off the map")
+    loose_heading_noise: bool = Field(
+        True, description="loose filter: cross-track process noise from the heading uncertainty")
     loose_converged_std_m: float = Field(10.0, gt=0, description="loose filter: std for a position fix")
     convergence_threshold_m: float = Field(20.0, gt=0)
     divergence_threshold_m: float = Field(75.0, gt=0)

@@ -1,0 +1,10 @@
+"""Particle state layout of the tightly coupled filter (Eq. 2) and the loose filter.
+
+Tight: x = [E, N, U, pitch, roll, yaw, gyro bias x, gyro bias z] (m, rad, rad/s), one
+row per particle; yaw is the Eq. 5 angle (counter-clockwise from north), unwrapped.
+Loose: x = [E, N] (m).
+"""
+
+E, N, U, PITCH, ROLL, YAW, BX, BZ = range(8)
+N_TIGHT = 8
+N_LOOSE = 2

@@ -1,0 +1,118 @@
+"""Tightly coupled TAN (Section 3, Algorithm 1): the 8-state particle filter loop.
+
+The loop is jitted end to end and composed of the kernels in ``propagate``,
+``likelihood``, ``resample`` and ``estimate``; random numbers come from the run's
+``numpy.random.Generator``, passed in. Per update k:
+
+1. propagate every particle over the interval (Eq. 1; skipped at k = 0);
+2. weight by the terrain altitude innovations of the beams and the distance
+   innovations (Eq. 20), accumulating log-weights;
+3. record the MMSE estimate and the weighted variances;
+4. if the best particle's mean squared normalised innovation stays above
+   ``div_sigma^2`` for ``div_steps`` updates, the filter has diverged: reinitialise the
+   cloud around the estimate with the initial spread (the paper's Section 3.3);
+5. resample when ESS < ``ess_thr * M``, then regularise: jitter position, heading and the
+   gyro biases with a mean- and variance-preserving kernel (``resample.regularise``), so
+   duplicated particles spread out again; if the horizontal cloud has nevertheless
+   collapsed below ``min_spread`` metres, re-spread it (the paper's reinitialisation of a
+   too-small cloud).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from tanbench.filters.estimate import weighted_estimate
+from tanbench.filters.likelihood import loglik_tight
+from tanbench.filters.propagate import propagate_tight
+from tanbench.filters.resample import (apply_resample, effective_sample_size, normalize_log_weights,
+                                      regularise, resample_indices)
+from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
+
+REGULARISED_STATES = {
+    "position-heading-biases": np.array([E, N, YAW, BX, BZ], dtype=np.int64),
+    "biases": np.array([BX, BZ], dtype=np.int64),
+}
+
+
+
+@nb.njit(cache=True)
+def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, half_side, std_up, std_att, std_yaw, std_bias):
+    """Initial cloud: uniform square of side 2 * half_side around (centre_e, centre_n), Gaussians else."""
+    for j in range(x.shape[0]):
+        x[j, 0] = centre_e + rng.uniform(-half_side, half_side)
+        x[j, 1] = centre_n + rng.uniform(-half_side, half_side)
+        x[j, 2] = up + std_up * rng.standard_normal()
+        x[j, 3] = pitch + std_att * rng.standard_normal()
+        x[j, 4] = roll + std_att * rng.standard_normal()
+        x[j, 5] = yaw + std_yaw * rng.standard_normal()
+        x[j, 6] = std_bias * rng.standard_normal()
+        x[j, 7] = std_bias * rng.standard_normal()
+
+
+@nb.njit(cache=True)
+def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams,
+                      z, e0, n0, inv_re, inv_rn,
+                      sig_pos, sig_up, sig_att, dist_mode, sig_d, sig_u, outside_sigma,
+                      scheme, ess_thr, reg_kind, reg_cols, reg_size, min_spread, div_sigma, div_steps,
+                      half_side, std_up, std_att, std_yaw, std_bias,
+                      est, var, ess_out, reinit_out):
+    """Run the filter over all updates; fill est/var (K+1, 8), ess_out and reinit_out (K+1,)."""
+    m = x.shape[0]
+    steps = ranges.shape[0]
+    logw = np.zeros(m)
+    ll = np.empty(m)
+    w = np.empty(m)
+    noise = np.empty((m, 6))
+    dist = np.zeros((m, 2))
+    uni = np.empty(m)
+    idx = np.empty(m, dtype=np.int64)
+    scratch = np.empty_like(x)
+    mean = np.empty(N_TIGHT)
+    v = np.empty(N_TIGHT)
+    cov = np.empty((2, 2))
+    bad = 0
+    for k in range(steps):
+        if k > 0:
+            for j in range(m):
+                for c in range(6):
+                    noise[j, c] = rng.standard_normal()
+            propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, sig_pos, sig_up, sig_att, dist_mode, dist)
+        best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
+                            dist, sig_d, ll)
+        for j in range(m):
+            logw[j] += ll[j]
+        normalize_log_weights(logw, w)
+        weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)
+        ess = effective_sample_size(w)
+        est[k, :] = mean
+        var[k, :] = v
+        ess_out[k] = ess
+        reinit_out[k] = 0
+        bad = bad + 1 if best > div_sigma * div_sigma else 0
+        if bad >= div_steps:
+            init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k],
+                       half_side, std_up, std_att, std_yaw, std_bias)
+            logw[:] = 0.0
+            bad = 0
+            reinit_out[k] = 1
+            continue
+        mx = logw.max()
+        for j in range(m):
+            logw[j] -= mx
+        if ess < ess_thr * m:
+            for j in range(m):
+                uni[j] = rng.random()
+            resample_indices(scheme, w, uni, idx)
+            apply_resample(x, idx, scratch)
+            regularise(x, rng, reg_kind, reg_cols, reg_size, N_TIGHT)
+            logw[:] = 0.0
+            spread = math.sqrt(v[E] + v[N])
+            if spread < min_spread:
+                s = min_spread / math.sqrt(2.0)
+                for j in range(m):
+                    x[j, E] += s * rng.standard_normal()
+                    x[j, N] += s * rng.standard_normal()
