@@ -37,14 +37,16 @@ class TerrainSpec(_Strict):
         "auto", description="synthetic layout; auto = 'vehicle-run' for area vehicle, else 'paper'")
     truth_resolution_m: float = Field(2.5, gt=0, le=10, description="synthetic truth grid spacing")
     map_error_m: float = Field(0.4, ge=0, description="std of the navigation map's node errors")
-    path: str | list[str] | None = Field(None, description="bathymetry file(s), kind=file")
+    path: str | list[str] | None = Field(
+        None, description="bathymetry file(s) or a glob of tiles, relative to the working directory")
     format: Literal["geotiff", "netcdf", "esri-ascii", "npy", "npz"] | None = None
     bounds: tuple[float, float, float, float] | None = Field(
         None, description="(west, east, south, north) of a file without georeferencing")
     origin: tuple[float, float] | None = Field(None, description="(e0, n0) of node [0, 0], metres")
     resolution: float | tuple[float, float] | None = Field(None, description="grid spacing, metres")
     rows: Literal["auto", "south_to_north", "north_to_south"] = "auto"
-    crs: Literal["projected", "geographic", "epsg3857"] | None = None
+    crs: Literal["metric", "projected", "epsg4326", "geographic", "epsg3857"] | None = Field(
+        None, description="grid coordinates: metres, lon/lat degrees or Web Mercator; default from the file")
     nodata: float | None = None
     fill_holes: bool = Field(False, description="fill no-data holes instead of rejecting the map")
 

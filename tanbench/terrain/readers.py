@@ -33,13 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
+from tanbench.earth import WGS84_A, WGS84_E2, radii_of_curvature
 from tanbench.errors import TanbenchError
 from tanbench.terrain.grid import Map
 
-WGS84_A = 6378137.0
-"""WGS84 semi-major axis, metres (also the Web-Mercator sphere radius)."""
-WGS84_E2 = 6.69437999014e-3
-"""WGS84 first eccentricity squared."""
 
 FORMATS: dict[str, tuple[str, ...]] = {
     "geotiff": (".tif", ".tiff"),
@@ -1020,10 +1017,8 @@ def _check_geographic_extent(crs, x0, dx, nx, y0, dy, ny, path) -> None:
 
 
 def _radii(lat_deg: float) -> tuple[float, float]:
-    """WGS84 meridian (R_N) and transverse (R_E) radii of curvature, metres."""
-    s2 = math.sin(math.radians(lat_deg)) ** 2
-    w = 1.0 - WGS84_E2 * s2
-    return WGS84_A * (1.0 - WGS84_E2) / w ** 1.5, WGS84_A / math.sqrt(w)
+    """WGS84 meridian (R_N) and transverse (R_E) radii of curvature at ``lat_deg``, metres."""
+    return radii_of_curvature(math.radians(lat_deg))
 
 
 def _metres_per_degree(lat_c: float) -> tuple[float, float]:
