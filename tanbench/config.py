@@ -6,8 +6,11 @@ Defaults are the paper's (Tables 1-2, Section 4); the area presets (``A``, ``B``
 ``vehicle``) fill in what differs between the paper's runs. Unknown keys are errors.
 
 ``Scenario.world_key()`` hashes only what defines the simulated vehicle data (terrain,
-trajectory, sensors, initial navigation errors, noise); cells that share it share
-their random vehicle data (common random numbers). ``cell_key()`` hashes everything.
+trajectory, sensors, initial navigation errors); cells that share it share their random
+vehicle data (common random numbers). The range-noise level ``noise_m`` is left out on
+purpose: noise is drawn as unit uniforms and scaled, so cells that differ only in
+noise share their random numbers too (and the simulation uses ``noise_m`` itself).
+``cell_key()`` hashes everything.
 """
 
 from __future__ import annotations

@@ -83,6 +83,9 @@ def motion_plan(scenario: Scenario) -> MotionPlan:
 
 
 def _cut(plan: MotionPlan, duration: float) -> MotionPlan:
+    if duration > plan.duration + 1e-9:
+        raise TanbenchError(
+            f"duration_s ({duration:g} s) is longer than the trajectory ({plan.duration:g} s)")
     ends = np.cumsum(plan.durations)
     keep = np.searchsorted(ends, duration - 1e-9) + 1
     durations = plan.durations[:keep].copy()

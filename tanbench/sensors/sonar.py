@@ -58,7 +58,8 @@ def true_ranges(truth_map, pos, pitch, roll, yaw, beams, beamwidth_deg=0.0, max_
     step = 0.5 * min(truth_map.res_e, truth_map.res_n)
     cast_rays(*truth_map.kernel_args(), np.ascontiguousarray(origins),
               np.ascontiguousarray(dirs.reshape(-1, 3)), float(max_range), step, out)
-    return out.reshape(n, m, r).min(axis=2) if r > 1 else out.reshape(n, m)
+    # first echo in the cone: the shortest ray that hits (a ray that misses does not blank the beam)
+    return np.fmin.reduce(out.reshape(n, m, r), axis=2) if r > 1 else out.reshape(n, m)
 
 
 def measure_ranges(true_range: np.ndarray, noise_m: float, rng) -> np.ndarray:

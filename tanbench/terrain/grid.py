@@ -91,6 +91,10 @@ class Map:
         return self.e0 + np.arange(nx) * self.res_e, self.n0 + np.arange(ny) * self.res_n
 
 
+# a point on the far edge may compute to (n - 1) + a rounding error; it is still on the map
+EDGE_TOL = 1e-9  # grid cells
+
+
 @nb.njit(cache=True, inline="always")
 def bilinear(z, e0, n0, inv_re, inv_rn, e, n):
     """Bilinear interpolation of grid ``z`` at (e, n); NaN outside the node extent."""
@@ -98,7 +102,7 @@ def bilinear(z, e0, n0, inv_re, inv_rn, e, n):
     fy = (n - n0) * inv_rn
     nx = z.shape[1]
     ny = z.shape[0]
-    if not (fx >= 0.0 and fy >= 0.0 and fx <= nx - 1 and fy <= ny - 1):
+    if not (fx >= 0.0 and fy >= 0.0 and fx <= nx - 1 + EDGE_TOL and fy <= ny - 1 + EDGE_TOL):
         return np.nan
     j = int(fx)
     i = int(fy)
@@ -129,7 +133,7 @@ def bilinear_numpy(z, e0, n0, inv_re, inv_rn, e, n):
     ny, nx = z.shape
     fx = (e - e0) * inv_re
     fy = (n - n0) * inv_rn
-    inside = (fx >= 0) & (fy >= 0) & (fx <= nx - 1) & (fy <= ny - 1)
+    inside = (fx >= 0) & (fy >= 0) & (fx <= nx - 1 + EDGE_TOL) & (fy <= ny - 1 + EDGE_TOL)
     j = np.clip(np.floor(np.where(inside, fx, 0.0)).astype(np.int64), 0, nx - 2)
     i = np.clip(np.floor(np.where(inside, fy, 0.0)).astype(np.int64), 0, ny - 2)
     tx = fx - j
