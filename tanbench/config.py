@@ -133,6 +133,8 @@ class NavigationSpec(_Strict):
     initial_heading_error_deg: float | None = Field(None, ge=-180, le=180)
     initial_position_error_m: float | None = Field(
         None, ge=0, description="side of the square of uniform initial horizontal error")
+    accel_bias_calibrated: bool = Field(
+        True, description="the accelerometer turn-on bias is removed by the surface (GPS-aided) alignment")
     level_window_s: float = Field(1.0, ge=0.01, le=60)
     level_compensation: bool = Field(True, description="remove omega x v from the specific force")
 

@@ -97,7 +97,7 @@ def _cut(plan: MotionPlan, duration: float) -> MotionPlan:
 def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> VehicleData:
     """Simulate one run's vehicle data for ``scenario`` from the run's ``seed``."""
     world_json = json.dumps(scenario.world_spec(), sort_keys=True)
-    truth, ping_idx, dvl_true, sbe_true = _noise_free_world(world_json)
+    truth, ping_idx, dvl_true, sbe_true = noise_free_world(world_json)
     s = scenario.sensors
 
     def stream(k):
@@ -115,8 +115,11 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
     init = stream(STREAM_INITIAL)
     pos_err = init.uniform(-0.5, 0.5, 2) * nav_cfg.initial_position_error_m
     yaw_err = -math.radians(nav_cfg.initial_heading_error_deg)  # heading is -yaw
+    # A GPS-aided alignment at the surface estimates the accelerometers' turn-on bias (it
+    # is observable there, unlike submerged); the in-run part and the noise remain.
+    nav_accel = accel - imu_errors.accel_turn_on if nav_cfg.accel_bias_calibrated else accel
     pos, pitch, roll, yaw = run_strapdown(
-        truth.dt, gyro, accel, dvl_velocity, depth, truth.pos[0, :2] + pos_err,
+        truth.dt, gyro, nav_accel, dvl_velocity, depth, truth.pos[0, :2] + pos_err,
         truth.yaw[0] + yaw_err, truth.latitude_rad, nav_cfg.level_window_s, nav_cfg.level_compensation)
     return VehicleData(
         truth=truth, gyro=gyro, accel=accel, imu_errors=imu_errors, dvl_velocity=dvl_velocity,
@@ -127,7 +130,7 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
 
 
 @lru_cache(maxsize=4)
-def _noise_free_world(world_json: str):
+def noise_free_world(world_json: str):
     """Truth at the IMU rate, ping indices and noise-free DVL/SBE ranges (cached per world)."""
     world = json.loads(world_json)
     scenario = Scenario(**world)
@@ -172,3 +175,38 @@ def check_track_on_map(truth: Truth, tmap) -> None:
         raise TanbenchError(
             f"the vehicle runs into the seafloor at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, {n[k]:.0f}) m: "
             f"depth {-u[k]:.1f} m over a {-floor[k]:.1f} m seafloor; raise the trajectory or move it")
+
+
+def vehicle_frame(vehicle: VehicleData, every: int = 1) -> "pd.DataFrame":
+    """One run's vehicle data as a table at the IMU rate (every ``every``-th sample).
+
+    Columns: time; true position and attitude; IMU outputs; held DVL velocity; pressure
+    depth; the navigation system's solution; and, on sonar ping samples, the measured
+    DVL and altimeter ranges (NaN elsewhere). Angles in degrees, headings compass.
+    """
+    import pandas as pd
+
+    from tanbench.vehicle.attitude import yaw_to_heading_deg
+
+    tr, nav = vehicle.truth, vehicle.nav
+    n = tr.t.size
+    dvl = np.full((n, vehicle.dvl_ranges.shape[1]), np.nan)
+    dvl[vehicle.ping_idx] = vehicle.dvl_ranges
+    sbe = np.full(n, np.nan)
+    sbe[vehicle.ping_idx] = vehicle.sbe_ranges[:, 0]
+    cols = {
+        "t": tr.t,
+        "truth_e": tr.pos[:, 0], "truth_n": tr.pos[:, 1], "truth_u": tr.pos[:, 2],
+        "truth_pitch_deg": np.degrees(tr.pitch), "truth_roll_deg": np.degrees(tr.roll),
+        "truth_heading_deg": yaw_to_heading_deg(tr.yaw),
+        "gyro_x": vehicle.gyro[:, 0], "gyro_y": vehicle.gyro[:, 1], "gyro_z": vehicle.gyro[:, 2],
+        "accel_x": vehicle.accel[:, 0], "accel_y": vehicle.accel[:, 1], "accel_z": vehicle.accel[:, 2],
+        "dvl_vx": vehicle.dvl_velocity[:, 0], "dvl_vy": vehicle.dvl_velocity[:, 1],
+        "dvl_vz": vehicle.dvl_velocity[:, 2], "pressure_depth": vehicle.depth,
+        "nav_e": nav.pos[:, 0], "nav_n": nav.pos[:, 1], "nav_u": nav.pos[:, 2],
+        "nav_pitch_deg": np.degrees(nav.pitch), "nav_roll_deg": np.degrees(nav.roll),
+        "nav_heading_deg": yaw_to_heading_deg(nav.yaw),
+        **{f"dvl_range_{i + 1}": dvl[:, i] for i in range(dvl.shape[1])},
+        "sbe_range": sbe,
+    }
+    return pd.DataFrame(cols).iloc[::every].reset_index(drop=True)

@@ -52,17 +52,25 @@ def update_indices(scenario: Scenario, vehicle: VehicleData) -> tuple[np.ndarray
     return rows, vehicle.ping_idx[rows]
 
 
-def check_initial_cloud(scenario: Scenario, vehicle: VehicleData, nmap) -> None:
-    """Refuse a start whose initial uncertainty square leaves the navigation map."""
-    half = scenario.filter.initial_area_m / 2.0
-    e, n = vehicle.nav.pos[0, 0], vehicle.nav.pos[0, 1]
-    corners_e = np.array([e - half, e + half, e - half, e + half])
-    corners_n = np.array([n - half, n - half, n + half, n + half])
-    if not nmap.contains(corners_e, corners_n).all():
+def check_start_on_map(scenario: Scenario, nmap) -> None:
+    """Refuse a start whose initial uncertainty could leave the navigation map.
+
+    The worst case: the navigation system's start is off the true start by up to half
+    the initial position error on each axis, and the filter's initial square of side
+    ``filter.initial_area_m`` is centred on it.
+    """
+    from tanbench.simulation import motion_plan
+
+    start = motion_plan(scenario).start_enu
+    reach = scenario.navigation.initial_position_error_m / 2.0 + scenario.filter.initial_area_m / 2.0
+    e = np.array([start[0] - reach, start[0] + reach])
+    n = np.array([start[1] - reach, start[1] + reach])
+    if not nmap.contains(e[[0, 1, 0, 1]], n[[0, 0, 1, 1]]).all():
         raise TanbenchError(
-            f"the initial uncertainty ({scenario.filter.initial_area_m:g} m square around "
-            f"({e:.0f}, {n:.0f}) m) leaves the navigation map (E {nmap.e0:.0f}..{nmap.e_max:.0f}, "
-            f"N {nmap.n0:.0f}..{nmap.n_max:.0f} m); move the start or shrink filter.initial_area_m")
+            f"the initial uncertainty (up to {reach:.0f} m around the start ({start[0]:.0f}, {start[1]:.0f}) m: "
+            f"navigation.initial_position_error_m / 2 + filter.initial_area_m / 2) leaves the navigation map "
+            f"(E {nmap.e0:.0f}..{nmap.e_max:.0f}, N {nmap.n0:.0f}..{nmap.n_max:.0f} m); move the start or "
+            f"shrink the initial uncertainty")
 
 
 def run_method(scenario: Scenario, method: str, vehicle: VehicleData,
@@ -72,7 +80,7 @@ def run_method(scenario: Scenario, method: str, vehicle: VehicleData,
         raise TanbenchError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
     f = scenario.filter
     nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
-    check_initial_cloud(scenario, vehicle, nmap)
+    check_start_on_map(scenario, nmap)
     rows, upd = update_indices(scenario, vehicle)
     nav = vehicle.nav
     T = scenario.sampling_time_s

@@ -23,10 +23,12 @@ MG = 9.80665e-3  # m/s^2
 
 @dataclass
 class ImuErrors:
-    """The drawn error processes (for diagnostics): biases per sample, (n, 3) each."""
+    """The drawn error processes: biases per sample, (n, 3) each, and the turn-on parts (3,)."""
 
     gyro_bias: np.ndarray
     accel_bias: np.ndarray
+    gyro_turn_on: np.ndarray
+    accel_turn_on: np.ndarray
 
 
 def gauss_markov(n: int, dt: float, sigma: float, tau: float, rng, axes: int = 3) -> np.ndarray:
@@ -52,4 +54,5 @@ def measure_imu(omega_ib, f_body, dt, sensors, rng):
     accel_bias = a_turn_on + a_in_run
     gyro = omega_ib + gyro_bias + g_noise
     accel = f_body + accel_bias + a_noise
-    return gyro, accel, ImuErrors(gyro_bias=gyro_bias, accel_bias=accel_bias)
+    return gyro, accel, ImuErrors(gyro_bias=gyro_bias, accel_bias=accel_bias, gyro_turn_on=g_turn_on,
+                                  accel_turn_on=a_turn_on)

@@ -22,8 +22,8 @@ from tanbench.paperdata import scenario_facts
 from tanbench.terrain.synthetic import Layout, Region
 from tanbench.vehicle.trajectory import paper_plan, sample_path, vehicle_run_plan
 
-ROUGH = dict(hurst=0.8, corner_m=350.0, peak_cap_sigma=1.5)
-FLAT = dict(hurst=0.8, corner_m=350.0)
+ROUGH = dict(hurst=1.5, corner_m=350.0, peak_cap_sigma=1.5)
+FLAT = dict(hurst=1.5, corner_m=1500.0)
 VEHICLE_FLAT_UNTIL_S = 240.0
 
 

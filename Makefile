@@ -1,0 +1,34 @@
+# tanbench: `make run` and `make test` work on a fresh clone with only Python installed.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+TB     := $(BIN)/tanbench
+
+.PHONY: run test bench paper baseline clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(VENV)/.installed-run: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[plot]"
+	touch $@
+
+$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[test,plot,maps,dask]"
+	touch $@ $(VENV)/.installed-run
+
+## run: the default sweep (configs/quick.yaml) on the built-in synthetic terrain; prints its tables
+run: $(VENV)/.installed-run
+	$(TB) run configs/quick.yaml
+
+## test: the test suite
+test: $(VENV)/.installed-test
+	$(BIN)/python -m pytest
+
+## bench: speed figures of the tight-dvl filter (printed, never asserted)
+bench: $(VENV)/.installed-run
+	$(TB) bench
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

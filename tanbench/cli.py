@@ -1,0 +1,285 @@
+"""The ``tanbench`` command line (Typer).
+
+Every command prints one clear ``error:`` line and exits 2 on bad input; a traceback
+is shown only with ``--debug``. Exit codes: 0 success, 1 failed runs or an unexpected
+error, 2 bad input, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from tanbench import __version__
+from tanbench.errors import TanbenchError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="tanbench: Monte Carlo benchmark for underwater terrain-aided navigation.")
+terrain_app = typer.Typer(no_args_is_help=True, help="Inspect the terrain: along-track depth and roughness.")
+app.add_typer(terrain_app, name="terrain")
+
+EXAMPLE = "\n\nExample: {}"
+
+
+def _version(value: bool):
+    if value:
+        typer.echo(f"tanbench {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version."),
+    debug: bool = typer.Option(False, "--debug", help="Show tracebacks instead of one-line errors."),
+):
+    """tanbench: Monte Carlo benchmark for underwater terrain-aided navigation."""
+
+
+def _default_out(sweep) -> Path:
+    return Path("results") / sweep.name
+
+
+@app.command(help="Run (or resume) a sweep: every cell x method x Monte Carlo run, into Parquet."
+             + EXAMPLE.format("tanbench run configs/quick.yaml --workers 2"))
+def run(
+    sweep_file: Path = typer.Argument(..., help="Sweep YAML file."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/<name>]."),
+    workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1, help="Worker processes [default: cores]."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler",
+                                            help="Dask scheduler address (tcp://host:8786) or 'local-dask'."),
+    runs: Optional[int] = typer.Option(None, "--runs", min=1, help="Override the sweep's runs per cell."),
+    force: bool = typer.Option(False, "--force", help="Recompute runs already stored."),
+    series: str = typer.Option("summary", "--series", help="Per-update series to keep: none, summary or full."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+):
+    from tanbench.results import to_markdown
+    from tanbench.runner.engine import run_sweep
+    from tanbench.runner.sweep import load_sweep
+
+    sweep = load_sweep(sweep_file)
+    if runs is not None:
+        sweep = sweep.with_runs(runs)
+    out = out or _default_out(sweep)
+    report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force,
+                       progress=not quiet, echo=typer.echo)
+    if report.interrupted:
+        typer.echo(f"interrupted: {report.finished} task(s) finished in this session are stored in {out}; "
+                   f"resume with: tanbench run {sweep_file} --out {out}", err=True)
+        raise typer.Exit(130)
+    typer.echo(f"{sweep.name}: {report.finished} task(s) run, {report.skipped} already done, "
+               f"{report.wall_s:.1f} s; results in {out}")
+    from tanbench.results import load, sweep_tables
+
+    tables = sweep_tables(load(out), sweep)
+    for name, table in tables.items():
+        typer.echo(to_markdown(_compact(table), title=name))
+    if report.failed_rows:
+        for line in report.errors[:10]:
+            typer.echo(f"failed: {line}", err=True)
+        typer.echo(f"{report.failed_rows} run(s) failed (recorded with their errors; rerun to retry)", err=True)
+        raise typer.Exit(1)
+
+
+def _compact(table):
+    keep = [c for c in table.columns if c not in ("ci95_low_m", "ci95_high_m", "min_time_avg_error_m",
+                                                   "max_time_avg_error_m", "std_final_error_m")]
+    return table[keep]
+
+
+@app.command(help="Show what a sweep will run: cells x methods x runs, what is done, a time estimate."
+             + EXAMPLE.format("tanbench plan configs/zhou2017.yaml"))
+def plan(
+    sweep_file: Path = typer.Argument(..., help="Sweep YAML file."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/<name>]."),
+    workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1),
+    runs: Optional[int] = typer.Option(None, "--runs", min=1),
+):
+    from tanbench.runner.engine import make_plan, task_cost
+    from tanbench.runner.sweep import load_sweep
+
+    sweep = load_sweep(sweep_file)
+    if runs is not None:
+        sweep = sweep.with_runs(runs)
+    out = out or _default_out(sweep)
+    p = make_plan(sweep, out, workers)
+    n_m = len(sweep.spec.methods)
+    typer.echo(f"sweep {sweep.name}: {len(sweep.cells)} cell(s) x {n_m} method(s) x {sweep.spec.runs} run(s) "
+               f"= {len(sweep.cells) * n_m * sweep.spec.runs} runs in {len(p.tasks)} task(s)")
+    for cell in sweep.cells:
+        done = sum(1 for t in p.tasks if t.cell_id == cell.cell_id and t.key in p.done)
+        varied = ", ".join(f"{k}={v}" for k, v in cell.varied.items()) or "defaults"
+        cost = sum(task_cost(t) for t in p.tasks if t.cell_id == cell.cell_id)
+        typer.echo(f"  {cell.cell_id}  [{', '.join(cell.tables)}]  {varied}: {done}/{sweep.spec.runs} done, "
+                   f"~{cost:.0f} core-s")
+    todo = p.todo
+    typer.echo(f"to do: {len(todo)} task(s) ({len(todo) * n_m} runs), about {p.estimate_seconds():.0f} s "
+               f"on {p.workers} worker(s) (estimate; `tanbench bench` measures this machine); results in {out}")
+
+
+@app.command(help="Validate a sweep file (keys, types, values, terrain, track, initial uncertainty)."
+             + EXAMPLE.format("tanbench validate configs/zhou2017.yaml"))
+def validate(sweep_file: Path = typer.Argument(..., help="Sweep YAML file.")):
+    from tanbench.runner.engine import validate_worlds
+    from tanbench.runner.sweep import load_sweep
+
+    sweep = load_sweep(sweep_file)
+    validate_worlds(sweep)
+    typer.echo(f"{sweep_file}: ok ({len(sweep.cells)} cell(s), {len(sweep.spec.methods)} method(s), "
+               f"{sweep.spec.runs} run(s) per cell)")
+
+
+@app.command(help="Print the summary tables of a results directory."
+             + EXAMPLE.format("tanbench tables results/zhou2017 --compare-paper"))
+def tables(
+    directory: Path = typer.Argument(..., help="Results directory."),
+    fmt: str = typer.Option("md", "--format", "-f", help="md or csv."),
+    compare_paper: bool = typer.Option(False, "--compare-paper", help="Beside the paper's published values."),
+):
+    from tanbench.results import load, sweep_tables, to_markdown
+    from tanbench.runner.sweep import load_sweep
+
+    if fmt not in ("md", "csv"):
+        raise TanbenchError(f"--format must be md or csv, not {fmt!r}")
+    sweep_path = directory / "sweep.yaml"
+    if not sweep_path.exists():
+        raise TanbenchError(f"{directory}: no sweep.yaml (not a tanbench results directory?)")
+    sweep = load_sweep(sweep_path)
+    result = sweep_tables(load(directory), sweep)
+    if compare_paper:
+        from tanbench.paper import compare_with_paper
+
+        result = compare_with_paper(result)
+    for name, table in result.items():
+        if fmt == "csv":
+            typer.echo(table.to_csv(index=False), nl=False)
+        else:
+            typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
+
+
+@app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet."
+             + EXAMPLE.format("tanbench simulate --area A --seed 1 --out run.parquet"))
+def simulate(
+    area: str = typer.Option("A", "--area", help="A, B or vehicle."),
+    seed: int = typer.Option(1, "--seed", help="Seed of the run's vehicle data."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Parquet file to write."),
+    duration: Optional[float] = typer.Option(None, "--duration", help="Seconds (default: the whole run)."),
+    every: int = typer.Option(1, "--every", min=1, help="Keep every n-th IMU sample."),
+):
+    import numpy as np
+
+    from tanbench.config import Scenario
+    from tanbench.simulation import simulate_vehicle, vehicle_frame
+
+    if area not in ("A", "B", "vehicle"):
+        raise TanbenchError(f"--area must be A, B or vehicle, not {area!r}")
+    scenario = Scenario(area=area, duration_s=duration)
+    vehicle = simulate_vehicle(scenario, np.random.SeedSequence(seed))
+    df = vehicle_frame(vehicle, every)
+    err = np.hypot(df["nav_e"] - df["truth_e"], df["nav_n"] - df["truth_n"])
+    typer.echo(f"area {area}, seed {seed}: {df['t'].iloc[-1]:.0f} s, {len(vehicle.ping_idx)} sonar pings; "
+               f"navigation system final horizontal error {err.iloc[-1]:.1f} m (max {err.max():.1f} m), "
+               f"heading error {vehicle.initial_heading_error_deg:+.0f} deg at start, "
+               f"{(df['nav_heading_deg'] - df['truth_heading_deg'] + 180).mod(360).iloc[-1] - 180:+.1f} deg at end")
+    if out is not None:
+        from tanbench.runner import store
+
+        try:
+            store.write_parquet(df, out, {"schema_version": store.SCHEMA_VERSION, "kind": "simulation",
+                                          "scenario": scenario.normalized(), "seed": seed})
+        except OSError as exc:
+            raise TanbenchError(f"cannot write {out}: {exc.strerror or exc}") from None
+        typer.echo(f"wrote {out} ({len(df)} rows x {len(df.columns)} columns)")
+
+
+@terrain_app.command("stats", help="Depth and roughness under the tracks (the paper's Section 4.2 statistics)."
+                     + EXAMPLE.format("tanbench terrain stats --sweep configs/monterey.yaml"))
+def terrain_stats(
+    sweep_file: Optional[Path] = typer.Option(None, "--sweep", help="Use the worlds of this sweep."),
+    fmt: str = typer.Option("md", "--format", "-f", help="md or json."),
+):
+    import pandas as pd
+
+    from tanbench.config import Scenario
+    from tanbench.results import to_markdown
+    from tanbench.simulation import motion_plan
+    from tanbench.terrain import navigation_map, truth_map
+    from tanbench.terrain.stats import track_statistics
+    from tanbench.vehicle.trajectory import sample_path
+
+    if sweep_file is not None:
+        from tanbench.runner.sweep import load_sweep
+
+        scenarios = [c.scenario for c in load_sweep(sweep_file).cells]
+    else:
+        scenarios = [Scenario(area="A"), Scenario(area="B"), Scenario(area="vehicle")]
+    rows, seen = [], set()
+    for sc in scenarios:
+        key = sc.world_key()
+        if key in seen:
+            continue
+        seen.add(key)
+        truth = truth_map(sc.terrain)
+        _, pos = sample_path(motion_plan(sc), 1.0)
+        maps = {}
+        for res in sorted({10.0, 20.0, 30.0, sc.map_resolution_m}):
+            if res >= truth.resolution - 1e-9:
+                try:
+                    maps[res] = navigation_map(sc.terrain, res)
+                except ValueError:
+                    pass
+        stats = track_statistics(truth, pos[:, :2], maps)
+        rows.append({"area": sc.area, "terrain": truth.name, **stats})
+    df = pd.DataFrame(rows)
+    if fmt == "json":
+        typer.echo(df.to_json(orient="records", indent=1))
+    else:
+        typer.echo(to_markdown(df, title="seafloor under the track (nadir, 1 Hz)"))
+        typer.echo("A flat track (small depth std and slope) is not an error, but TAN has little to work with.")
+
+
+@app.command(help="Benchmark the tight-dvl filter (ns per particle-step, run time, numpy ratio)."
+             + EXAMPLE.format("tanbench bench --json"))
+def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON object.")):
+    from tanbench.bench import run_bench
+
+    figures = run_bench()
+    if as_json:
+        typer.echo(json.dumps(figures))
+        return
+    t = figures["targets"]
+    typer.echo(f"tight-dvl, {figures['particles']} particles, 4 beams, 10 m map, {figures['updates']} updates")
+    typer.echo(f"  ns per particle-step : {figures['ns_per_particle_step']:8.1f}   (target <= {t['ns_per_particle_step']})")
+    typer.echo(f"  1190 s run, filter   : {figures['run_wall_s']:8.3f} s (target <= {t['run_wall_s']})")
+    typer.echo(f"  one step jitted      : {figures['step_jit_us']:8.1f} us")
+    typer.echo(f"  one step numpy ref   : {figures['step_numpy_us']:8.1f} us")
+    typer.echo(f"  numpy / jitted       : {figures['numpy_ratio']:8.1f} x (target >= {t['numpy_ratio']})")
+
+
+def main():
+    """Console entry point: one-line errors unless --debug."""
+    debug = "--debug" in sys.argv[1:]
+    try:
+        app()
+    except TanbenchError as exc:
+        if debug:
+            raise
+        typer.echo(f"error: {exc}", err=True)
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        typer.echo("interrupted", err=True)
+        sys.exit(130)
+    except Exception as exc:  # noqa: BLE001 - the last line of defence against tracebacks
+        if debug:
+            raise
+        typer.echo(f"error: unexpected {type(exc).__name__}: {exc} (run with --debug for the traceback)", err=True)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,199 @@
+"""Results as pandas: load runs and series, summarise, build the paper-style tables.
+
+``load(DIR)`` returns the tidy runs table (one row per cell, method and run; columns
+documented in docs/results.md), ``load_series(DIR)`` the per-update series (the Monte
+Carlo summary by default), ``summarize(df, by=...)`` the statistics the tables show.
+``build_outputs`` writes ``series/summary.parquet`` and ``tables/`` for a sweep.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from tanbench.errors import TanbenchError
+from tanbench.runner import store
+
+# the scenario columns every table shows (the paper's Tables 3-7 columns)
+TABLE_SCENARIO_COLUMNS = ["area", "map_resolution_m", "noise_m", "sampling_time_s", "particles"]
+SUMMARY_ERRORS = ["horizontal_error_m", "east_error_m", "north_error_m", "heading_error_deg"]
+SUMMARY_MEANS = ["est_e", "est_n", "est_heading_deg", "truth_e", "truth_n", "truth_heading_deg",
+                 "nav_e", "nav_n", "nav_heading_deg", "nav_horizontal_error_m"]
+PERCENTILES = (5, 50, 95)
+BOOTSTRAP_SAMPLES = 2000
+
+
+def _files(directory: Path, pattern: str) -> list[Path]:
+    return sorted(directory.glob(pattern))
+
+
+def load(directory, status: str | None = None) -> pd.DataFrame:
+    """Every stored run of a results directory (``status="ok"`` keeps successful runs)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise TanbenchError(f"{directory}: no such results directory")
+    files = store.run_files(directory)
+    if not files:
+        raise TanbenchError(f"{directory}: no runs stored (expected {directory}/runs/cell_id=*/run-*.parquet)")
+    frames = [store.read_parquet(f) for f in files]
+    df = pd.concat(frames, ignore_index=True)
+    if status is not None:
+        df = df[df["status"] == status].reset_index(drop=True)
+    return df
+
+
+def load_series(directory, kind: str = "summary") -> pd.DataFrame:
+    """The per-update series: ``"summary"`` (Monte Carlo statistics) or ``"runs"`` (every run)."""
+    directory = Path(directory)
+    if kind == "summary":
+        path = directory / "series" / "summary.parquet"
+        if not path.exists():
+            raise TanbenchError(f"{directory}: no series summary (was the sweep run with --series none?)")
+        return store.read_parquet(path)
+    if kind == "runs":
+        files = _files(directory / "series" / "runs", "cell_id=*/run-*.parquet")
+        if not files:
+            raise TanbenchError(f"{directory}: no per-run series (run the sweep with --series full)")
+        frames = []
+        for f in files:
+            df = store.read_parquet(f)
+            df.insert(0, "run", int(f.stem.split("-")[1]))
+            df.insert(0, "cell_id", f.parent.name.split("=", 1)[1])
+            frames.append(df)
+        return pd.concat(frames, ignore_index=True)
+    raise TanbenchError(f"unknown series kind {kind!r} (summary or runs)")
+
+
+def bootstrap_ci(values: np.ndarray, level: float = 0.95, samples: int = BOOTSTRAP_SAMPLES,
+                 seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap confidence interval of the mean (deterministic for a seed)."""
+    values = np.asarray(values, dtype=float)
+    values = values[~np.isnan(values)]
+    if values.size == 0:
+        return (np.nan, np.nan)
+    rng = np.random.default_rng(seed)
+    means = values[rng.integers(0, values.size, (samples, values.size))].mean(axis=1)
+    lo, hi = np.percentile(means, [50 * (1 - level), 100 - 50 * (1 - level)])
+    return float(lo), float(hi)
+
+
+def summarize(df: pd.DataFrame, by=("cell_id", "method")) -> pd.DataFrame:
+    """Per group: n_runs and the statistics of the final and time-averaged errors.
+
+    Failed runs are counted in ``n_failed`` and left out of the statistics.
+    """
+    by = list(by)
+    rows = []
+    for key, g in df.groupby(by, sort=False, dropna=False):
+        ok = g[g["status"] == "ok"]
+        f = ok["final_horizontal_error_m"].to_numpy(dtype=float)
+        lo, hi = bootstrap_ci(f)
+        rows.append({
+            **dict(zip(by, key if isinstance(key, tuple) else (key,))),
+            "n_runs": int(len(ok)),
+            "mean_final_error_m": float(np.mean(f)) if f.size else np.nan,
+            "min_final_error_m": float(np.min(f)) if f.size else np.nan,
+            "max_final_error_m": float(np.max(f)) if f.size else np.nan,
+            "std_final_error_m": float(np.std(f, ddof=1)) if f.size > 1 else np.nan,
+            "median_final_error_m": float(np.median(f)) if f.size else np.nan,
+            "ci95_low_m": lo,
+            "ci95_high_m": hi,
+            "mean_time_avg_error_m": float(ok["mean_horizontal_error_m"].mean()) if f.size else np.nan,
+            "min_time_avg_error_m": float(ok["mean_horizontal_error_m"].min()) if f.size else np.nan,
+            "max_time_avg_error_m": float(ok["mean_horizontal_error_m"].max()) if f.size else np.nan,
+            "mean_final_heading_error_deg": float(ok["final_heading_error_deg"].mean()) if f.size else np.nan,
+            "n_diverged": int(ok["diverged"].astype(bool).sum()),
+            "n_failed": int((g["status"] != "ok").sum()),
+        })
+    return pd.DataFrame(rows)
+
+
+def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
+    """One summary table per design of ``sweep``, from its current cells only."""
+    ids = {c.cell_id for c in sweep.cells}
+    runs = runs[runs["cell_id"].isin(ids)]
+    out = {}
+    method_order = {m: i for i, m in enumerate(sweep.spec.methods)}
+    for table, params in sweep.table_params.items():
+        cells = [c for c in sweep.cells if table in c.tables]
+        if not cells:
+            continue
+        sub = runs[runs["cell_id"].isin({c.cell_id for c in cells})]
+        extra = [p for p in params if p not in TABLE_SCENARIO_COLUMNS]
+        cols = TABLE_SCENARIO_COLUMNS + [p for p in extra if p in sub.columns]
+        if sub.empty:
+            continue
+        summary = summarize(sub, by=cols + ["method"])
+        summary.insert(0, "table", table)
+        summary["_m"] = summary["method"].map(method_order)
+        summary = summary.sort_values(cols[1:] + ["_m"], kind="stable").drop(columns="_m")
+        out[table] = summary.reset_index(drop=True)
+    return out
+
+
+def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
+    """Monte Carlo statistics over runs, per (cell, method, t).
+
+    For each error: the mean, the mean of its absolute value (``_abs_mean``; the same as
+    the mean for the horizontal error) and the 5th/50th/95th percentiles; for positions
+    and headings: the mean. ``n_runs`` counts the runs at each time.
+    """
+    allruns = pd.concat(frames, ignore_index=True)
+    allruns = allruns.assign(**{f"{c}_abs": allruns[c].abs() for c in SUMMARY_ERRORS})
+    grouped = allruns.groupby(["cell_id", "method", "t"], sort=True)
+    parts = [grouped[SUMMARY_MEANS].mean(), grouped["t"].size().rename("n_runs")]
+    for col in SUMMARY_ERRORS:
+        g = grouped[col]
+        stats = {f"{col}_mean": g.mean(), f"{col}_abs_mean": grouped[f"{col}_abs"].mean()}
+        stats.update({f"{col}_p{p:02d}": g.quantile(p / 100.0) for p in PERCENTILES})
+        parts.append(pd.DataFrame(stats))
+    out = pd.concat(parts, axis=1).reset_index()
+    floats = [c for c in out.columns if c not in ("cell_id", "method", "n_runs")]
+    return out.astype({c: "float32" for c in floats})
+
+
+def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
+    """Write series/summary.parquet (if series are kept) and tables/ for ``sweep``."""
+    meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
+    ids = {c.cell_id for c in sweep.cells}
+    if series != "none":
+        base = out / ("series/runs" if series == "full" else ".work/series")
+        frames = []
+        for f in _files(base, "cell_id=*/run-*.parquet"):
+            cell_id = f.parent.name.split("=", 1)[1]
+            if cell_id in ids:
+                df = store.read_parquet(f)
+                df.insert(0, "cell_id", cell_id)
+                frames.append(df)
+        if frames:
+            store.write_parquet(series_summary(frames), out / "series" / "summary.parquet", meta)
+    try:
+        runs = load(out)
+    except TanbenchError:
+        return {}
+    tables = sweep_tables(runs, sweep)
+    for name, table in tables.items():
+        store.write_parquet(table, out / "tables" / f"{name}.parquet", meta)
+        store.write_text(to_markdown(table, title=name), out / "tables" / f"{name}.md")
+    return tables
+
+
+def _fmt(v) -> str:
+    if isinstance(v, (float, np.floating)):
+        if np.isnan(v):
+            return "-"
+        return f"{v:.1f}" if abs(v) >= 0.1 or v == 0 else f"{v:.3g}"
+    return str(v)
+
+
+def to_markdown(df: pd.DataFrame, title: str | None = None) -> str:
+    """A plain GitHub-flavoured Markdown table (no extra dependency)."""
+    lines = [f"### {title}", ""] if title else []
+    cols = list(df.columns)
+    lines.append("| " + " | ".join(cols) + " |")
+    lines.append("|" + "|".join("---" for _ in cols) + "|")
+    for _, row in df.iterrows():
+        lines.append("| " + " | ".join(_fmt(row[c]) for c in cols) + " |")
+    return "\n".join(lines) + "\n"

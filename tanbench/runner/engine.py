@@ -1,0 +1,212 @@
+"""Running a sweep: validate, plan, fan out, store each finished task, summarise.
+
+The parent process owns the results directory: workers return their rows and series,
+the parent writes one file per finished task (atomically), so killing a sweep at any
+moment loses at most the tasks in flight, and re-running the same command resumes:
+tasks whose every row is stored with status "ok" are skipped (``--force`` recomputes).
+When every task is done, the series summary and the tables are rebuilt from what is
+stored for the sweep's current cells.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from tanbench.config import flatten
+from tanbench.errors import TanbenchError
+from tanbench.runner import store
+from tanbench.runner.sweep import Sweep
+from tanbench.runner.tasks import Task, TaskResult, execute
+
+SERIES_MODES = ("none", "summary", "full")
+# rough single-core cost of one particle-step, ns (``tanbench bench`` measures it here)
+NS_PER_PARTICLE_STEP = {"tight-dvl": 130.0, "tight-sbe": 100.0, "loose-dvl": 60.0}
+SIMULATION_S = 0.1
+
+
+@dataclass
+class Plan:
+    """What a sweep will do in a results directory."""
+
+    sweep: Sweep
+    out: Path
+    tasks: list[Task]
+    done: set
+    workers: int
+
+    @property
+    def todo(self) -> list[Task]:
+        return [t for t in self.tasks if t.key not in self.done]
+
+    def estimate_seconds(self, tasks=None) -> float:
+        tasks = self.todo if tasks is None else tasks
+        total = sum(task_cost(t) for t in tasks)
+        return total / max(1, min(self.workers, max(1, len(tasks))))
+
+
+@dataclass
+class RunReport:
+    """Counts and timings of a sweep run."""
+
+    finished: int = 0
+    failed_rows: int = 0
+    skipped: int = 0
+    wall_s: float = 0.0
+    errors: list[str] = field(default_factory=list)
+    interrupted: bool = False
+
+
+def task_cost(task: Task) -> float:
+    """Estimated single-core seconds of a task (simulation + every method)."""
+    s = json.loads(task.scenario_json)
+    steps = (s.get("duration_s") or 1190.0) / s["sampling_time_s"]
+    return SIMULATION_S + sum(NS_PER_PARTICLE_STEP[m] * 1e-9 * s["particles"] * steps for m in task.methods)
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+def build_tasks(sweep: Sweep, keep_series: bool) -> list[Task]:
+    """Every (cell, run) task of the sweep, run-major so early results cover every cell."""
+    methods = tuple(sweep.spec.methods)
+    cells = [(c.cell_id, json.dumps(c.scenario.normalized(), sort_keys=True)) for c in sweep.cells]
+    return [Task(cell_id, spec, run, methods, sweep.spec.seed, keep_series)
+            for run in range(sweep.spec.runs) for cell_id, spec in cells]
+
+
+def validate_worlds(sweep: Sweep) -> None:
+    """Check every cell against its terrain: maps, track, sonar and initial uncertainty."""
+    from tanbench.filters.run import check_start_on_map
+    from tanbench.simulation import noise_free_world
+    from tanbench.terrain import navigation_map
+
+    seen = set()
+    for cell in sweep.cells:
+        sc = cell.scenario
+        label = f"cell {cell.cell_id} ({', '.join(f'{k}={v}' for k, v in cell.varied.items()) or 'defaults'})"
+        try:
+            world = json.dumps(sc.world_spec(), sort_keys=True)
+            if world not in seen:
+                noise_free_world(world)
+                seen.add(world)
+            nmap = navigation_map(sc.terrain, sc.map_resolution_m)
+            check_start_on_map(sc, nmap)
+        except ValueError as exc:
+            raise TanbenchError(f"{label}: {exc}") from None
+        except TanbenchError as exc:
+            raise TanbenchError(f"{label}: {exc}") from None
+
+
+def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str = "summary") -> Plan:
+    """The tasks of ``sweep`` and which of them ``out`` already holds."""
+    if series not in SERIES_MODES:
+        raise TanbenchError(f"--series must be one of {', '.join(SERIES_MODES)}")
+    tasks = build_tasks(sweep, keep_series=series != "none")
+    done = store.completed_tasks(out) if (out / "runs").is_dir() else set()
+    return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers())
+
+
+def _row_frame(result: TaskResult, cell_columns: dict, sweep: Sweep) -> pd.DataFrame:
+    rows = []
+    for row in result.rows:
+        rows.append({"sweep": sweep.name, **cell_columns[result.cell_id], **row})
+    return pd.DataFrame(rows)
+
+
+def cell_columns(sweep: Sweep) -> dict[str, dict]:
+    """Per cell: its tables and every scenario parameter as a flat column."""
+    out = {}
+    for cell in sweep.cells:
+        params = flatten(cell.scenario.normalized())
+        params = {k: (json.dumps(v) if isinstance(v, (list, tuple, dict)) else v) for k, v in params.items()}
+        out[cell.cell_id] = {"tables": ",".join(cell.tables), **params}
+    return out
+
+
+def store_result(result: TaskResult, plan: Plan, columns: dict, meta: dict, full_series: bool) -> None:
+    """Write a finished task's rows (and series) atomically."""
+    out = plan.out
+    if result.series:
+        frames = [pd.DataFrame({"method": m, **s}) for m, s in result.series.items()]
+        store.write_parquet(pd.concat(frames, ignore_index=True),
+                            store.series_file(out, result.cell_id, result.run, full_series), meta)
+    store.write_parquet(_row_frame(result, columns, plan.sweep), store.run_file(out, result.cell_id, result.run), meta)
+
+
+def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: str | None = None,
+              series: str = "summary", force: bool = False, progress: bool = True, echo=print) -> RunReport:
+    """Run (or resume) ``sweep`` into ``out``; returns a :class:`RunReport`."""
+    from tanbench.results import build_outputs
+
+    store.check_writable(out)
+    store.check_existing_schema(out)
+    validate_worlds(sweep)
+    if force:
+        store.remove_cells(out, [c.cell_id for c in sweep.cells])
+    plan = make_plan(sweep, out, workers, series)
+    meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
+    store.write_text(sweep.text, out / "sweep.yaml")
+    todo = plan.todo
+    report = RunReport(skipped=len(plan.tasks) - len(todo))
+    started = time.perf_counter()
+    if todo:
+        _execute(plan, todo, scheduler, meta, series == "full", progress, report, echo)
+    report.wall_s = time.perf_counter() - started
+    if not report.interrupted:
+        build_outputs(out, sweep, series)
+    return report
+
+
+def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progress, report: RunReport, echo):
+    from tqdm import tqdm
+
+    from tanbench.runner.executors import open_executor
+
+    columns = cell_columns(plan.sweep)
+    n_methods = len(plan.sweep.spec.methods)
+    bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
+               dynamic_ncols=True, smoothing=0.05)
+    workers = min(plan.workers, len(todo)) if scheduler is None else plan.workers
+    with open_executor(workers, scheduler) as handle:
+        bar.set_description(f"{plan.sweep.name} on {handle.description}")
+        pending = {handle.executor.submit(execute, task): task for task in todo}
+        try:
+            while pending:
+                done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+                for fut in done:
+                    task = pending.pop(fut)
+                    try:
+                        result = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - a crashed worker: record, keep going
+                        result = _crashed(task, exc)
+                    store_result(result, plan, columns, meta, full_series)
+                    failed = [r for r in result.rows if r["status"] != "ok"]
+                    report.failed_rows += len(failed)
+                    report.errors += [f"{r['cell_id']} run {r['run']} {r['method']}: {r['error']}" for r in failed]
+                    report.finished += 1
+                    bar.update(n_methods)
+        except KeyboardInterrupt:
+            report.interrupted = True
+            handle.stop_now()
+        finally:
+            bar.close()
+
+
+def _crashed(task: Task, exc: BaseException) -> TaskResult:
+    from tanbench.filters.run import METRIC_COLUMNS
+
+    msg = f"worker failed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+    rows = [{"cell_id": task.cell_id, "run": task.run, "seed": -1, "method": m, "filter_seed": -1,
+             **{k: np.nan for k in METRIC_COLUMNS}, "status": "error", "error": msg, "wall_s": np.nan}
+            for m in task.methods]
+    return TaskResult(task.cell_id, task.run, rows, {})

@@ -1,0 +1,128 @@
+"""Where tasks run: a local process pool or a Dask cluster, through one interface.
+
+Both give a ``concurrent.futures.Executor``: the local one is a
+``ProcessPoolExecutor`` (spawned workers); the Dask one is ``Client.get_executor``
+(``pure=False``) on an existing scheduler (``tcp://host:8786``) or on a
+``LocalCluster`` started for the sweep (``local-dask``). Every worker runs single
+threaded (numba and BLAS threads = 1, so parallelism is one task per worker) and
+compiles (or loads from the on-disk cache) the numba kernels once, in its initialiser.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+
+from tanbench.errors import TanbenchError
+
+THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+CONNECT_TIMEOUT_S = 10
+
+
+def single_thread_environment() -> None:
+    """Make this process and the processes it starts use one thread each."""
+    for var in THREAD_VARS:
+        os.environ[var] = "1"
+    try:
+        import numba
+
+        numba.set_num_threads(1)
+    except (ImportError, ValueError):
+        pass
+
+
+def warm_up() -> None:
+    """Compile (or load from cache) every jitted kernel with a tiny run of each method."""
+    import numpy as np
+
+    from tanbench.config import Scenario
+    from tanbench.filters import METHODS
+    from tanbench.filters.run import run_method
+    from tanbench.simulation import simulate_vehicle
+
+    scenario = Scenario(duration_s=3.0, particles=16)
+    vehicle = simulate_vehicle(scenario, np.random.SeedSequence(0))
+    for method in METHODS:
+        run_method(scenario, method, vehicle, np.random.SeedSequence(1))
+
+
+def _local_worker_init() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    single_thread_environment()
+    warm_up()
+
+
+def _dask_worker_init() -> None:
+    single_thread_environment()
+    warm_up()
+
+
+class ExecutorHandle:
+    """An open executor plus how to stop it at once (Ctrl-C)."""
+
+    def __init__(self, executor, description: str, stop_now):
+        self.executor = executor
+        self.description = description
+        self._stop_now = stop_now
+
+    def stop_now(self) -> None:
+        self._stop_now()
+
+
+@contextmanager
+def open_executor(workers: int, scheduler: str | None):
+    """Yield an :class:`ExecutorHandle` for ``workers`` local processes or a Dask scheduler."""
+    single_thread_environment()
+    if scheduler is None:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_local_worker_init)
+
+        def stop_now():
+            for proc in list(getattr(pool, "_processes", {}).values()):
+                proc.terminate()
+            pool.shutdown(wait=False, cancel_futures=True)
+
+        try:
+            yield ExecutorHandle(pool, f"{workers} local worker process{'es' if workers > 1 else ''}", stop_now)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        return
+    with _dask_client(workers, scheduler) as (client, description):
+        try:
+            client.run(_dask_worker_init)
+        except Exception as exc:  # noqa: BLE001 - a worker that cannot start is a user-facing problem
+            raise TanbenchError(f"Dask workers at {scheduler} could not start tanbench: {exc}") from None
+        executor = client.get_executor(pure=False)
+        yield ExecutorHandle(executor, description, lambda: executor.shutdown(wait=False))
+
+
+@contextmanager
+def _dask_client(workers: int, scheduler: str):
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise TanbenchError("--scheduler needs Dask: pip install 'tanbench[dask]'") from None
+    if scheduler == "local-dask":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+        try:
+            yield client, f"a Dask LocalCluster of {workers} worker{'s' if workers > 1 else ''}"
+        finally:
+            client.close()
+            cluster.close()
+        return
+    try:
+        client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S}s")
+    except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError from the address parser
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise TanbenchError(
+            f"cannot reach the Dask scheduler at {scheduler} within {CONNECT_TIMEOUT_S} s ({reason})") from None
+    try:
+        n = len(client.scheduler_info().get("workers", {}))
+        yield client, f"the Dask cluster at {scheduler} ({n} worker{'s' if n != 1 else ''})"
+    finally:
+        client.close()

@@ -1,0 +1,169 @@
+"""The results directory: Parquet files written atomically, with provenance.
+
+Layout of ``DIR``::
+
+    sweep.yaml                          the sweep that wrote it (tables are built from it)
+    runs/cell_id=<id>/run-<r>.parquet   one file per finished task: a row per method
+    series/summary.parquet              Monte Carlo mean and percentiles over time
+    series/runs/cell_id=<id>/run-<r>.parquet    every run's series (--series full)
+    .work/series/...                    the same, kept out of sight (--series summary)
+    tables/<table>.parquet, .md         the paper-style summary tables
+
+Every file is written to a temporary name in its directory and renamed into place, so
+an interrupted sweep never leaves a half-written file, and every Parquet file carries
+the provenance (sweep YAML, root seed, versions, git revision, creation time) and the
+schema version in its schema metadata under the key ``tanbench``.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import shutil
+import subprocess
+from functools import lru_cache
+from pathlib import Path
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from tanbench.errors import TanbenchError
+
+SCHEMA_VERSION = 1
+META_KEY = b"tanbench"
+
+
+@lru_cache(maxsize=1)
+def _git_revision() -> str:
+    root = Path(__file__).resolve().parents[2]
+    try:
+        out = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
+                             text=True, timeout=5)
+        rev = out.stdout.strip()
+        if rev:
+            dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                                   capture_output=True, text=True, timeout=5).stdout.strip()
+            return rev + ("-dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return ""
+
+
+def provenance(sweep_text: str, sweep_name: str, root_seed: int) -> dict:
+    """What produced a result file: the sweep, its seed and the software versions."""
+    import numba
+    import numpy
+
+    from tanbench import __version__
+
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "sweep": sweep_name,
+        "sweep_yaml": sweep_text,
+        "root_seed": root_seed,
+        "tanbench_version": __version__,
+        "git_revision": _git_revision(),
+        "numpy_version": numpy.__version__,
+        "numba_version": numba.__version__,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def write_parquet(df: pd.DataFrame, path: Path, meta: dict) -> None:
+    """Write ``df`` to ``path`` atomically with ``meta`` in the schema metadata."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    merged = dict(table.schema.metadata or {})
+    merged[META_KEY] = json.dumps(meta).encode()
+    table = table.replace_schema_metadata(merged)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as fh:
+        pq.write_table(table, fh, compression="zstd")
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def write_text(text: str, path: Path) -> None:
+    """Write a text file atomically."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def read_meta(path: Path) -> dict:
+    """The tanbench metadata of one Parquet file; a clear error if it is not one of ours."""
+    try:
+        schema = pq.read_schema(path)
+    except (OSError, pa.ArrowException) as exc:
+        raise TanbenchError(f"{path}: not a readable Parquet file ({str(exc).splitlines()[0]})") from None
+    raw = (schema.metadata or {}).get(META_KEY)
+    if raw is None:
+        raise TanbenchError(f"{path}: not written by tanbench (no 'tanbench' metadata)")
+    meta = json.loads(raw)
+    version = meta.get("schema_version")
+    if version != SCHEMA_VERSION:
+        raise TanbenchError(
+            f"{path}: written with results schema {version}, this tanbench reads schema {SCHEMA_VERSION}; "
+            f"re-run the sweep with --force or use the tanbench version that wrote it")
+    return meta
+
+
+def read_parquet(path: Path, columns=None) -> pd.DataFrame:
+    """Read one of our Parquet files (checking its schema) into pandas."""
+    read_meta(path)
+    try:
+        return pq.read_table(path, columns=columns).to_pandas()
+    except (OSError, pa.ArrowException) as exc:
+        raise TanbenchError(f"{path}: corrupt Parquet file ({str(exc).splitlines()[0]})") from None
+
+
+def run_file(out: Path, cell_id: str, run: int) -> Path:
+    return out / "runs" / f"cell_id={cell_id}" / f"run-{run:05d}.parquet"
+
+
+def series_file(out: Path, cell_id: str, run: int, full: bool) -> Path:
+    base = out / "series" / "runs" if full else out / ".work" / "series"
+    return base / f"cell_id={cell_id}" / f"run-{run:05d}.parquet"
+
+
+def run_files(out: Path) -> list[Path]:
+    return sorted((out / "runs").glob("cell_id=*/run-*.parquet"))
+
+
+def completed_tasks(out: Path) -> set[tuple[str, int]]:
+    """(cell_id, run) of tasks whose every row finished with status 'ok'."""
+    done = set()
+    for path in run_files(out):
+        df = read_parquet(path, columns=["status"])
+        if len(df) and (df["status"] == "ok").all():
+            done.add((path.parent.name.split("=", 1)[1], int(path.stem.split("-")[1])))
+    return done
+
+
+def check_writable(out: Path) -> None:
+    """Create ``out`` if needed and make sure files can be written there."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / f".write-test.{os.getpid()}"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise TanbenchError(f"output directory {out} is not writable ({exc.strerror or exc})") from None
+
+
+def check_existing_schema(out: Path) -> None:
+    """Refuse to add to a results directory written with another schema."""
+    files = run_files(out)
+    if files:
+        read_meta(files[0])
+
+
+def remove_cells(out: Path, cell_ids) -> None:
+    """Delete every stored run and series of these cells (``--force``)."""
+    for cell_id in cell_ids:
+        for base in (out / "runs", out / "series" / "runs", out / ".work" / "series"):
+            shutil.rmtree(base / f"cell_id={cell_id}", ignore_errors=True)

@@ -1,0 +1,191 @@
+"""Sweep files: loading, validation with one clear error line, and expansion into cells.
+
+A sweep names a root seed, a number of Monte Carlo runs per cell, the methods, the
+scenario defaults shared by every cell, and designs that vary them:
+
+* ``tables``: one design per table, each a mapping ``parameter -> list of values``;
+  the values of one table's parameters are combined (a product), so a table that
+  varies one parameter is the paper's one-factor-at-a-time design and single-valued
+  entries act as fixed overrides (e.g. ``{area: [B]}``);
+* ``grid``: a full factorial over its parameters.
+
+Parameters are scenario keys, nested ones with dots (``filter.resampling``,
+``sensors.gyro_arw_deg_sqrt_h``). A cell is a fully resolved :class:`Scenario`;
+identical cells reached from several tables run once and remember every table they
+belong to.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from tanbench.config import Scenario
+from tanbench.errors import TanbenchError
+from tanbench.filters import METHODS
+
+Value = Any
+
+
+class SweepSpec(BaseModel):
+    """The top level of a sweep file."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
+    description: str = ""
+    seed: int = Field(ge=0)
+    runs: int = Field(gt=0, le=100_000)
+    methods: list[str] = Field(default_factory=lambda: list(METHODS), min_length=1)
+    scenario: dict[str, Any] = Field(default_factory=dict)
+    tables: dict[str, dict[str, list[Value]]] = Field(default_factory=dict)
+    grid: dict[str, list[Value]] | None = None
+
+    @field_validator("methods")
+    @classmethod
+    def _known_methods(cls, v):
+        for m in v:
+            if m not in METHODS:
+                raise ValueError(f"unknown method {m!r} (known: {', '.join(METHODS)})")
+        if len(set(v)) != len(v):
+            raise ValueError("a method is listed twice")
+        return v
+
+
+@dataclass
+class Cell:
+    """One resolved scenario, the tables it belongs to and the values they vary."""
+
+    scenario: Scenario
+    tables: list[str] = field(default_factory=list)
+    varied: dict[str, Value] = field(default_factory=dict)
+
+    @property
+    def cell_id(self) -> str:
+        return self.scenario.cell_key()
+
+
+@dataclass
+class Sweep:
+    """A validated sweep: its spec, the raw YAML text, and its cells in file order."""
+
+    spec: SweepSpec
+    text: str
+    path: Path | None
+    cells: list[Cell]
+    table_params: dict[str, list[str]]
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def with_runs(self, runs: int) -> "Sweep":
+        spec = self.spec.model_copy(update={"runs": runs})
+        return Sweep(spec, self.text, self.path, self.cells, self.table_params)
+
+
+def load_sweep(path) -> Sweep:
+    """Read and validate a sweep file; any problem is one ``TanbenchError`` line."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise TanbenchError(f"{path}: no such sweep file") from None
+    except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
+        raise TanbenchError(f"{path}: cannot read the sweep file ({exc.__class__.__name__})") from None
+    return parse_sweep(text, str(path), path)
+
+
+def parse_sweep(text: str, label: str = "<sweep>", path: Path | None = None) -> Sweep:
+    """Validate sweep YAML ``text``; ``label`` names it in error messages."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise TanbenchError(f"{label}: malformed YAML{where}: {problem}") from None
+    if not isinstance(data, dict):
+        raise TanbenchError(f"{label}: a sweep file must be a mapping of keys (name, seed, runs, ...)")
+    try:
+        spec = SweepSpec(**data)
+    except ValidationError as exc:
+        raise TanbenchError(f"{label}: {format_validation_error(exc)}") from None
+    except TypeError as exc:
+        raise TanbenchError(f"{label}: {exc}") from None
+    cells, table_params = expand(spec, label)
+    return Sweep(spec=spec, text=text, path=path, cells=cells, table_params=table_params)
+
+
+def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
+    """The first pydantic error as 'key.path: message (got value)'."""
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"] if not isinstance(p, int) or True)
+    loc = f"{prefix}{loc}" if loc else prefix.rstrip(".")
+    msg = err["msg"]
+    if err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    elif msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    got = err.get("input")
+    shown = "" if err["type"] in ("extra_forbidden", "missing") or isinstance(got, (dict, list)) else f" (got {got!r})"
+    more = len(exc.errors()) - 1
+    tail = f"; and {more} more problem{'s' if more > 1 else ''}" if more else ""
+    return f"{loc}: {msg}{shown}{tail}" if loc else f"{msg}{shown}{tail}"
+
+
+def _set_dotted(d: dict, key: str, value) -> None:
+    parts = key.split(".")
+    for p in parts[:-1]:
+        nxt = d.get(p)
+        if not isinstance(nxt, dict):
+            nxt = {}
+            d[p] = nxt
+        d = nxt
+    d[parts[-1]] = value
+
+
+def make_scenario(base: dict, overrides: dict, label: str, where: str) -> Scenario:
+    """A validated Scenario from defaults plus dotted overrides; errors name the key."""
+    data = copy.deepcopy(base)
+    for k, v in overrides.items():
+        _set_dotted(data, k, v)
+    try:
+        return Scenario(**data)
+    except ValidationError as exc:
+        raise TanbenchError(f"{label}: {where}{format_validation_error(exc)}") from None
+
+
+def expand(spec: SweepSpec, label: str) -> tuple[list[Cell], dict[str, list[str]]]:
+    """Cells of every design, deduplicated by their normalised spec (cell key)."""
+    designs: list[tuple[str, dict[str, list]]] = list(spec.tables.items())
+    if spec.grid is not None:
+        designs.append(("grid", spec.grid))
+    if not designs:
+        designs = [("default", {})]
+    make_scenario(spec.scenario, {}, label, "scenario.")  # the defaults alone must be valid
+    cells: dict[str, Cell] = {}
+    table_params: dict[str, list[str]] = {}
+    for table, design in designs:
+        for key, values in design.items():
+            if not values:
+                raise TanbenchError(f"{label}: {table}.{key}: needs at least one value")
+        keys = list(design)
+        table_params[table] = [k for k in keys if len(design[k]) > 1] or keys
+        for combo in itertools.product(*(design[k] for k in keys)):
+            overrides = dict(zip(keys, combo))
+            where = f"{'tables.' if table != 'grid' else ''}{table}: "
+            scenario = make_scenario(spec.scenario, overrides, label, where)
+            key = scenario.cell_key()
+            cell = cells.setdefault(key, Cell(scenario=scenario))
+            if table not in cell.tables:
+                cell.tables.append(table)
+            for k, v in overrides.items():
+                cell.varied.setdefault(k, v)
+    return list(cells.values()), table_params
