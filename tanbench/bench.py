@@ -26,11 +26,9 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
                                            normalize_log_weights_numpy, resample_indices, resample_indices_numpy)
     from tanbench.filters.run import run_method, update_indices
     from tanbench.navigation.increments import compute_increments
-    from tanbench.runner.executors import single_thread_environment
     from tanbench.simulation import simulate_vehicle
     from tanbench.terrain import navigation_map
 
-    single_thread_environment()
     scenario = Scenario(particles=particles)
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(2017))
     run_method(scenario, "tight-dvl", vehicle, np.random.SeedSequence(1))  # compile / load cache
@@ -69,7 +67,8 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
         ll = np.empty(particles)
         w = np.empty(particles)
         propagate_tight(x, inc[k], vehicle.nav.yaw[upd[k]], noise, *sig, 1, dist)
-        loglik_tight(x, beams, ranges, *zargs, 1.0, 5.0, dist, 0.1, ll)
+        loglik_tight(x, beams, ranges, *zargs, 1.0, 5.0, dist, 0.1, vehicle.nav.pitch[upd[k + 1]],
+                     vehicle.nav.roll[upd[k + 1]], vehicle.nav.yaw[upd[k + 1]], ll)
         normalize_log_weights(ll, w)
         weighted_estimate(x, w, 5, 0.0, np.empty(8), np.empty(8), np.empty((2, 2)))
         idx = np.empty(particles, dtype=np.int64)

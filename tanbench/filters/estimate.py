@@ -15,28 +15,35 @@ import numpy as np
 
 @nb.njit(cache=True, fastmath=True)
 def weighted_estimate(x, w, yaw_col, yaw_ref, mean, var, cov_en):
-    """Fill ``mean``/``var`` (ncols,) and ``cov_en`` (2, 2) from particles ``x`` and weights ``w``."""
+    """Fill ``mean``/``var`` (ncols,) and ``cov_en`` (2, 2) from particles ``x`` and weights ``w``.
+
+    One pass of weighted first and second moments about the first particle (shifting
+    keeps the sums small, so E[x^2] - E[x]^2 loses no precision at map coordinates).
+    """
     m, nc = x.shape
+    ref = np.empty(nc)
     for c in range(nc):
+        ref[c] = x[0, c]
         mean[c] = 0.0
         var[c] = 0.0
-    for j in range(m):
-        for c in range(nc):
-            v = x[j, c]
-            if c == yaw_col:
-                v = _wrap(v - yaw_ref)
-            mean[c] += w[j] * v
+    if yaw_col >= 0:
+        ref[yaw_col] = 0.0
     cen = 0.0
     for j in range(m):
-        de = x[j, 0] - mean[0]
-        dn = x[j, 1] - mean[1]
-        cen += w[j] * de * dn
+        wj = w[j]
         for c in range(nc):
-            v = x[j, c]
             if c == yaw_col:
-                v = _wrap(v - yaw_ref)
-            d = v - mean[c]
-            var[c] += w[j] * d * d
+                v = _wrap(x[j, c] - yaw_ref)
+            else:
+                v = x[j, c] - ref[c]
+            mean[c] += wj * v
+            var[c] += wj * v * v
+        cen += wj * (x[j, 0] - ref[0]) * (x[j, 1] - ref[1])
+    for c in range(nc):
+        var[c] = max(var[c] - mean[c] * mean[c], 0.0)
+    cen -= mean[0] * mean[1]
+    for c in range(nc):
+        mean[c] += ref[c]
     if yaw_col >= 0:
         mean[yaw_col] += yaw_ref
     cov_en[0, 0] = var[0]

@@ -22,14 +22,19 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
+from tanbench.filters.trig import sin_cos_about
 from tanbench.terrain.grid import bilinear, bilinear_numpy
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 
 @nb.njit(cache=True, fastmath=True)
 def loglik_tight(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                 dist_innov, sig_d, out):
-    """Fill ``out`` (M,) with each particle's log-likelihood; return the best chi^2 per beam."""
+                 dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, out):
+    """Fill ``out`` (M,) with each particle's log-likelihood; return the best chi^2 per beam.
+
+    ``ref_*`` (the navigation attitude) only speed up the trigonometry: each particle's
+    angles are evaluated as reference plus a usually small offset (``trig.sin_cos_about``).
+    """
     m = beams.shape[0]
     used = 0
     for i in range(m):
@@ -39,13 +44,13 @@ def loglik_tight(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outside_sig
     inv_d2 = 1.0 / (sig_d * sig_d)
     outside_sq = (outside_sigma * sig_u) ** 2
     best = np.inf
+    s_pitch, c_pitch = math.sin(ref_pitch), math.cos(ref_pitch)
+    s_roll, c_roll = math.sin(ref_roll), math.cos(ref_roll)
+    s_yaw, c_yaw = math.sin(ref_yaw), math.cos(ref_yaw)
     for j in range(x.shape[0]):
-        st = math.sin(x[j, PITCH])
-        ct = math.cos(x[j, PITCH])
-        sg = math.sin(x[j, ROLL])
-        cg = math.cos(x[j, ROLL])
-        sp = math.sin(x[j, YAW])
-        cp = math.cos(x[j, YAW])
+        st, ct = sin_cos_about(s_pitch, c_pitch, x[j, PITCH] - ref_pitch)
+        sg, cg = sin_cos_about(s_roll, c_roll, x[j, ROLL] - ref_roll)
+        sp, cp = sin_cos_about(s_yaw, c_yaw, x[j, YAW] - ref_yaw)
         c00 = cg * cp - st * sg * sp
         c01 = -ct * sp
         c02 = sg * cp + st * cg * sp

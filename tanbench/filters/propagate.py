@@ -28,6 +28,7 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
+from tanbench.filters.trig import sin_cos
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, JAXE, JAXN, JAZE,
                                             JAZN, SX, SZ)
 
@@ -47,9 +48,7 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
     for j in range(x.shape[0]):
         bx = x[j, BX]
         bz = x[j, BZ]
-        delta = x[j, YAW] - yaw_nav0
-        c = math.cos(delta)
-        s = math.sin(delta)
+        s, c = sin_cos(x[j, YAW] - yaw_nav0)
         ue = inc[D0E] + bx * inc[JAXE] - bz * inc[JAZE]
         un = inc[D0N] + bx * inc[JAXN] - bz * inc[JAZN]
         de = c * ue - s * un

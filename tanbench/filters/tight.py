@@ -82,7 +82,7 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
                     noise[j, c] = rng.standard_normal()
             propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, sig_pos, sig_up, sig_att, dist_mode, dist)
         best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                            dist, sig_d, ll)
+                            dist, sig_d, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
         for j in range(m):
             logw[j] += ll[j]
         normalize_log_weights(logw, w)

@@ -6,6 +6,8 @@ Both give a ``concurrent.futures.Executor``: the local one is a
 ``LocalCluster`` started for the sweep (``local-dask``). Every worker runs single
 threaded (numba and BLAS threads = 1, so parallelism is one task per worker) and
 compiles (or loads from the on-disk cache) the numba kernels once, in its initialiser.
+Workers of an existing Dask cluster are started by their operator: start them with
+``NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1`` (tanbench only warms them up).
 """
 
 from __future__ import annotations
@@ -22,16 +24,17 @@ THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "
 CONNECT_TIMEOUT_S = 10
 
 
-def single_thread_environment() -> None:
-    """Make this process and the processes it starts use one thread each."""
-    for var in THREAD_VARS:
-        os.environ[var] = "1"
-    try:
-        import numba
+SINGLE_THREAD_ENV = {var: "1" for var in THREAD_VARS}
 
-        numba.set_num_threads(1)
-    except (ImportError, ValueError):
-        pass
+
+def single_thread_environment() -> None:
+    """Make this process use one thread per library; call it before numpy/numba are imported.
+
+    Worker processes call it first thing (their initialiser runs before any numerical
+    import); the parent never needs it: the kernels are not parallel, and changing
+    NUMBA_NUM_THREADS after numba has started its threads is an error.
+    """
+    os.environ.update(SINGLE_THREAD_ENV)
 
 
 def warm_up() -> None:
@@ -56,7 +59,6 @@ def _local_worker_init() -> None:
 
 
 def _dask_worker_init() -> None:
-    single_thread_environment()
     warm_up()
 
 
@@ -75,7 +77,6 @@ class ExecutorHandle:
 @contextmanager
 def open_executor(workers: int, scheduler: str | None):
     """Yield an :class:`ExecutorHandle` for ``workers`` local processes or a Dask scheduler."""
-    single_thread_environment()
     if scheduler is None:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_local_worker_init)
@@ -107,7 +108,7 @@ def _dask_client(workers: int, scheduler: str):
         raise TanbenchError("--scheduler needs Dask: pip install 'tanbench[dask]'") from None
     if scheduler == "local-dask":
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None, env=SINGLE_THREAD_ENV)
         client = Client(cluster)
         try:
             yield client, f"a Dask LocalCluster of {workers} worker{'s' if workers > 1 else ''}"
