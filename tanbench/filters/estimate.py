@@ -12,8 +12,10 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters import FASTMATH
 
-@nb.njit(cache=True, fastmath=True)
+
+@nb.njit(cache=True, fastmath=FASTMATH)
 def weighted_estimate(x, w, yaw_col, yaw_ref, mean, var, cov_en):
     """Fill ``mean``/``var`` (ncols,) and ``cov_en`` (2, 2) from particles ``x`` and weights ``w``.
 

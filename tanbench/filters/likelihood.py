@@ -21,13 +21,14 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import sin_cos_about
 from tanbench.terrain.grid import bilinear, bilinear_numpy
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 
-@nb.njit(cache=True, fastmath=True)
+@nb.njit(cache=True, fastmath=FASTMATH)
 def loglik_tight(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
                  dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, out):
     """Fill ``out`` (M,) with each particle's log-likelihood; return the best chi^2 per beam.
@@ -97,7 +98,7 @@ def loglik_tight_numpy(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outsi
     return loglik, best
 
 
-@nb.njit(cache=True, fastmath=True)
+@nb.njit(cache=True, fastmath=FASTMATH)
 def loglik_loose(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, out):
     """Loose filter: beams projected once with the navigation attitude, ``offsets`` (m, 3) in m.
 

@@ -87,7 +87,8 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, z, e0, n0, inv_re, in
         ess_out[k] = ess
         fixed_out[k] = 1 if converged else 0
         reinit_out[k] = 0
-        bad = bad + 1 if best > div_sigma * div_sigma else 0
+        if best < np.inf:  # an update without any bottom lock says nothing about divergence
+            bad = bad + 1 if best > div_sigma * div_sigma else 0
         if bad >= div_steps:
             init_loose(x, rng, out_en[k, 0], out_en[k, 1], half_side)
             logw[:] = 0.0

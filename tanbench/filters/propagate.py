@@ -27,6 +27,7 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import sin_cos
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, JAXE, JAXN, JAZE,
@@ -35,7 +36,7 @@ from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, 
 DIST_NONE, DIST_PARTICLE, DIST_NAVIGATION = 0, 1, 2
 
 
-@nb.njit(cache=True, fastmath=True)
+@nb.njit(cache=True, fastmath=FASTMATH)
 def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov):
     """Move particles ``x`` (M, 8) over one interval; fill ``dist_innov`` (M, 2).
 
@@ -91,7 +92,7 @@ def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dis
     return x, innov
 
 
-@nb.njit(cache=True, fastmath=True)
+@nb.njit(cache=True, fastmath=FASTMATH)
 def propagate_loose(x, d0e, d0n, noise, sig_pos, sig_heading):
     """Loose filter: move every particle by the navigation displacement plus noise.
 

@@ -10,7 +10,9 @@ The loop is jitted end to end and composed of the kernels in ``propagate``,
 3. record the MMSE estimate and the weighted variances;
 4. if the best particle's mean squared normalised innovation stays above
    ``div_sigma^2`` for ``div_steps`` updates, the filter has diverged: reinitialise the
-   cloud around the estimate with the initial spread (the paper's Section 3.3);
+   cloud with the initial spread, positions around the estimate and headings around
+   the navigation heading (a diverged filter's own heading is not trusted; the
+   paper's Section 3.3);
 5. resample when ESS < ``ess_thr * M``, then regularise: jitter position, heading and the
    gyro biases with a mean- and variance-preserving kernel (``resample.regularise``), so
    duplicated particles spread out again; if the horizontal cloud has nevertheless
@@ -92,7 +94,8 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
         var[k, :] = v
         ess_out[k] = ess
         reinit_out[k] = 0
-        bad = bad + 1 if best > div_sigma * div_sigma else 0
+        if best < np.inf:  # an update without any bottom lock says nothing about divergence
+            bad = bad + 1 if best > div_sigma * div_sigma else 0
         if bad >= div_steps:
             init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k],
                        half_side, std_up, std_att, std_yaw, std_bias)

@@ -1,0 +1,104 @@
+"""Helpers shared by the filter test files (kernels, conformance, statistics).
+
+Kept out of ``conftest.py`` (owned by the foundation tests): plain functions plus a few
+fixtures that the filter test modules import explicitly. Everything is deterministic:
+seeds are fixed constants here.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from tanbench.config import Scenario
+from tanbench.terrain.grid import Map
+
+KERNEL_SEED = 20170601  # the random inputs of the kernel tests
+VEHICLE_SEED = 4242  # the vehicle run whose increments/map feed the kernel tests
+STAT_ROOT = 31337  # root entropy of the statistical Monte Carlo runs
+FILTER_ROOT = 777  # root entropy of the statistical filter seeds
+
+# the per-update series every method returns (run._score), and the method-specific ones
+COMMON_SERIES = {
+    "t", "est_e", "est_n", "est_u", "est_heading_deg", "truth_e", "truth_n", "truth_u",
+    "truth_heading_deg", "nav_e", "nav_n", "nav_heading_deg", "east_error_m", "north_error_m",
+    "horizontal_error_m", "heading_error_deg", "nav_horizontal_error_m", "ess", "reinit",
+    "var_e", "var_n",
+}
+TIGHT_SERIES = COMMON_SERIES | {"var_u", "var_pitch", "var_roll", "var_yaw", "var_bias_x", "var_bias_z",
+                                "bias_x_deg_h", "bias_z_deg_h"}
+LOOSE_SERIES = COMMON_SERIES | {"position_fix"}
+
+
+def series_keys(method: str) -> set:
+    return TIGHT_SERIES if method.startswith("tight") else LOOSE_SERIES
+
+
+def short_scenario(duration_s: float = 120.0, particles: int = 400, **overrides) -> Scenario:
+    """A cheap area-A scenario; nested overrides are given as dicts (``filter={...}``)."""
+    return Scenario(duration_s=duration_s, particles=particles, **overrides)
+
+
+def vehicle_seed(run: int, root: int = STAT_ROOT) -> np.random.SeedSequence:
+    """Vehicle seed of Monte Carlo run ``run``: ``SeedSequence(root, spawn_key=(run,))``."""
+    return np.random.SeedSequence(root, spawn_key=(run,))
+
+
+def filter_seed(run: int, method_index: int, root: int = FILTER_ROOT) -> np.random.SeedSequence:
+    """Filter seed of one method on run ``run``."""
+    return np.random.SeedSequence(root, spawn_key=(run, method_index))
+
+
+def snapshot(obj):
+    """A deep copy of a VehicleData (or anything) to compare against after a run."""
+    return copy.deepcopy(obj)
+
+
+def assert_same_tree(a, b, path="vehicle"):
+    """Recursively assert two dataclass/array/scalar trees are bit-identical."""
+    if hasattr(a, "__dataclass_fields__"):
+        for name in a.__dataclass_fields__:
+            assert_same_tree(getattr(a, name), getattr(b, name), f"{path}.{name}")
+    elif isinstance(a, np.ndarray):
+        np.testing.assert_array_equal(a, b, err_msg=path)
+    elif isinstance(a, float) and math.isnan(a):
+        assert math.isnan(b), path
+    else:
+        assert a == b, path
+
+
+def plane_like(template: Map, height: float) -> Map:
+    """A flat seafloor at ``height`` m (up) with ``template``'s extent and spacing."""
+    return Map(np.full(template.z.shape, float(height)), template.e0, template.n0, template.res_e,
+               template.res_n, name="plane")
+
+
+@pytest.fixture
+def plane_world(monkeypatch):
+    """Replace the truth and navigation seafloors by a flat plane at -90 m (deeper than the track).
+
+    The simulation's world cache is cleared before and after, so no other test sees the plane.
+    """
+    import tanbench.filters.run as run_mod
+    import tanbench.simulation as sim_mod
+    from tanbench.terrain import navigation_map, truth_map
+
+    real_truth = truth_map
+    real_nav = navigation_map
+    height = -90.0
+
+    def fake_truth(spec):
+        return plane_like(real_truth(spec), height)
+
+    def fake_nav(spec, resolution_m):
+        return plane_like(real_nav(spec, resolution_m), height)
+
+    sim_mod.noise_free_world.cache_clear()
+    monkeypatch.setattr(sim_mod, "truth_map", fake_truth)
+    monkeypatch.setattr(run_mod, "navigation_map", fake_nav)
+    yield height
+    monkeypatch.undo()
+    sim_mod.noise_free_world.cache_clear()
