@@ -1,0 +1,162 @@
+"""Figures for a results directory (matplotlib, the ``plot`` extra).
+
+For one cell per area (the first of the sweep in each area, i.e. its default cell) the
+analogs of the paper's Figures 4-7 (area A), 8-11 (area B) and 14-15 (vehicle run):
+east, north and horizontal position and error against time, heading against time, the
+Monte Carlo mean of each method with the truth in black; and the tracks over the map's
+contours (Figures 2-3, 6, 10). Written as PNG under ``DIR/figures/``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tanbench.errors import TanbenchError
+
+COLORS = {"tight-dvl": "tab:red", "tight-sbe": "tab:blue", "loose-dvl": "tab:purple"}
+STYLES = {"tight-dvl": "--", "tight-sbe": "-.", "loose-dvl": ":"}
+
+
+def _pyplot():
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise TanbenchError("plotting needs matplotlib: pip install 'tanbench[plot]'") from None
+    return plt
+
+
+def representative_cells(sweep) -> list:
+    """The first cell of the sweep in each area (its defaults there)."""
+    seen, out = set(), []
+    for cell in sweep.cells:
+        if cell.scenario.area not in seen:
+            seen.add(cell.scenario.area)
+            out.append(cell)
+    return out
+
+
+def plot_results(directory) -> list[Path]:
+    """Write every figure for ``directory``; returns the files written."""
+    from tanbench.results import load_series
+    from tanbench.runner.sweep import load_sweep
+    from tanbench.terrain import navigation_map
+
+    plt = _pyplot()
+    directory = Path(directory)
+    sweep_path = directory / "sweep.yaml"
+    if not sweep_path.exists():
+        raise TanbenchError(f"{directory}: no sweep.yaml (not a tanbench results directory?)")
+    sweep = load_sweep(sweep_path)
+    series = load_series(directory)
+    figdir = directory / "figures"
+    figdir.mkdir(parents=True, exist_ok=True)
+    written = []
+    cells = [c for c in representative_cells(sweep) if c.cell_id in set(series["cell_id"])]
+    for cell in cells:
+        s = series[series["cell_id"] == cell.cell_id]
+        label = cell.scenario.area
+        methods = [m for m in sweep.spec.methods if m in set(s["method"])]
+        first = s[s["method"] == methods[0]]
+        t = first["t"].to_numpy()
+        for comp, name in (("e", "east"), ("n", "north")):
+            fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+            ax1.plot(t, first[f"truth_{comp}"], "k-", lw=1.5, label="truth")
+            for m in methods:
+                sm = s[s["method"] == m]
+                ax1.plot(sm["t"], sm[f"est_{comp}"], STYLES[m], color=COLORS[m], label=m)
+                ax2.plot(sm["t"], sm[f"{name}_error_m_mean"], STYLES[m], color=COLORS[m], label=m)
+            ax1.set_ylabel(f"relative {name} (m)")
+            ax2.set_ylabel(f"{name} error (m)")
+            ax2.set_xlabel("time (s)")
+            ax1.legend(fontsize=8)
+            ax1.set_title(f"area {label}: {name} position and error, Monte Carlo mean")
+            written.append(_save(fig, figdir / f"{label}_{name}.png", plt))
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 5))
+        nmap = navigation_map(cell.scenario.terrain, cell.scenario.map_resolution_m)
+        _contours(ax1, nmap, first, margin=200.0)
+        ax1.plot(first["truth_e"], first["truth_n"], "k-", lw=1.5, label="truth")
+        for m in methods:
+            sm = s[s["method"] == m]
+            ax1.plot(sm["est_e"], sm["est_n"], STYLES[m], color=COLORS[m], label=m)
+            ax2.plot(sm["t"], sm["horizontal_error_m_mean"], STYLES[m], color=COLORS[m], label=m)
+            ax2.fill_between(sm["t"], sm["horizontal_error_m_p05"], sm["horizontal_error_m_p95"],
+                             color=COLORS[m], alpha=0.12)
+        ax1.set_xlabel("east (m)")
+        ax1.set_ylabel("north (m)")
+        ax1.legend(fontsize=8)
+        ax1.set_title(f"area {label}: horizontal position (MC mean)")
+        ax2.set_xlabel("time (s)")
+        ax2.set_ylabel("horizontal error (m)")
+        ax2.set_title("horizontal error: MC mean, 5-95 % band")
+        written.append(_save(fig, figdir / f"{label}_horizontal.png", plt))
+        fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+        # unwrapped so a track through north does not jump between 0 and 360 deg
+        truth_heading = np.degrees(np.unwrap(np.radians(first["truth_heading_deg"].to_numpy())))
+        ax1.plot(t, truth_heading, "k-", lw=1.5, label="truth")
+        for m in methods:
+            sm = s[s["method"] == m]
+            est = truth_heading[: len(sm)] + sm["heading_error_deg_mean"].to_numpy()
+            ax1.plot(sm["t"], est, STYLES[m], color=COLORS[m], label=m)
+            ax2.plot(sm["t"], sm["heading_error_deg_abs_mean"], STYLES[m], color=COLORS[m], label=m)
+        ax1.set_ylabel("heading (deg)")
+        ax2.set_ylabel("|heading error| (deg)")
+        ax2.set_xlabel("time (s)")
+        ax1.legend(fontsize=8)
+        ax1.set_title(f"area {label}: heading, Monte Carlo mean")
+        written.append(_save(fig, figdir / f"{label}_heading.png", plt))
+    written += _track_maps(cells, series, figdir, plt)
+    return written
+
+
+def _contours(ax, nmap, first, margin):
+    e, n = nmap.node_coords()
+    lo_e, hi_e = first["truth_e"].min() - margin, first["truth_e"].max() + margin
+    lo_n, hi_n = first["truth_n"].min() - margin, first["truth_n"].max() + margin
+    je = (e >= lo_e) & (e <= hi_e)
+    jn = (n >= lo_n) & (n <= hi_n)
+    cs = ax.contour(e[je], n[jn], nmap.z[np.ix_(jn, je)], levels=15, cmap="viridis", linewidths=0.6)
+    ax.clabel(cs, fontsize=6, fmt="%.0f")
+    ax.set_aspect("equal")
+
+
+def _track_maps(cells, series, figdir, plt) -> list[Path]:
+    """Tracks over the contours of each terrain (Figures 2-3)."""
+    from tanbench.terrain import navigation_map
+
+    out = []
+    by_terrain = {}
+    for cell in cells:
+        key = (cell.scenario.terrain.model_dump_json(), cell.scenario.map_resolution_m)
+        by_terrain.setdefault(key, []).append(cell)
+    for k, group in enumerate(by_terrain.values()):
+        sc = group[0].scenario
+        nmap = navigation_map(sc.terrain, sc.map_resolution_m)
+        fig, ax = plt.subplots(figsize=(12, 5.5))
+        e, n = nmap.node_coords()
+        cs = ax.contourf(e, n, nmap.z, levels=25, cmap="viridis")
+        fig.colorbar(cs, ax=ax, label="elevation (m)")
+        for cell in group:
+            s = series[series["cell_id"] == cell.cell_id]
+            first = s[s["method"] == s["method"].iloc[0]]
+            ax.plot(first["truth_e"], first["truth_n"], "r-", lw=1.2)
+            ax.annotate(f"area {cell.scenario.area}", (first["truth_e"].iloc[0], first["truth_n"].iloc[0]),
+                        color="w", fontsize=9, xytext=(5, -12), textcoords="offset points")
+        ax.set_aspect("equal")
+        ax.set_xlabel("east (m)")
+        ax.set_ylabel("north (m)")
+        ax.set_title(f"tracks over the {sc.map_resolution_m:g} m navigation map ({nmap.name})")
+        name = "tracks.png" if k == 0 else f"tracks_{k + 1}.png"
+        out.append(_save(fig, figdir / name, plt))
+    return out
+
+
+def _save(fig, path: Path, plt) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
