@@ -64,11 +64,18 @@ def run(
     if runs is not None:
         sweep = sweep.with_runs(runs)
     out = out or _default_out(sweep)
-    report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force,
-                       progress=not quiet, echo=typer.echo)
+    # the resume command repeats what selects the tasks and where their series go
+    again = f"tanbench run {sweep_file} --out {out}" + (f" --runs {runs}" if runs is not None else "") + (
+        f" --series {series}" if series != "summary" else "")
+    try:
+        report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force,
+                           progress=not quiet, echo=typer.echo)
+    except KeyboardInterrupt:  # before the tasks (validation) or after them (tables): nothing half-done
+        typer.echo(f"interrupted; resume with: {again}", err=True)
+        raise typer.Exit(130) from None
     if report.interrupted:
         typer.echo(f"interrupted: {report.finished} task(s) finished in this session are stored in {out}; "
-                   f"resume with: tanbench run {sweep_file} --out {out}", err=True)
+                   f"resume with: {again}", err=True)
         raise typer.Exit(130)
     typer.echo(f"{sweep.name}: {report.finished} task(s) run, {report.skipped} already done, "
                f"{report.wall_s:.1f} s; results in {out}")
@@ -149,15 +156,20 @@ def tables(
         raise TanbenchError(f"{directory}: no sweep.yaml (not a tanbench results directory?)")
     sweep = load_sweep(sweep_path)
     result = sweep_tables(load(directory), sweep)
+    if not result:
+        raise TanbenchError(f"{directory}: no runs of the cells of {sweep_path} are stored (run the sweep first)")
     if compare_paper:
         from tanbench.paper import compare_with_paper
 
         result = compare_with_paper(result)
+    if fmt == "csv":
+        # one CSV (every table's rows; the `table` column tells them apart), so it parses as one file
+        import pandas as pd
+
+        typer.echo(pd.concat(list(result.values()), ignore_index=True).to_csv(index=False), nl=False)
+        return
     for name, table in result.items():
-        if fmt == "csv":
-            typer.echo(table.to_csv(index=False), nl=False)
-        else:
-            typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
+        typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
 
 
 @app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet."
@@ -259,11 +271,25 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
     typer.echo(f"  numpy / jitted       : {figures['numpy_ratio']:8.1f} x (target >= {t['numpy_ratio']})")
 
 
+def _usage_error_types() -> tuple[type, ...]:
+    """Click's usage-error base class: typer's vendored copy (typer >= 0.20) and/or click's own."""
+    found = []
+    try:
+        import click
+
+        found.append(click.exceptions.ClickException)
+    except ImportError:  # pragma: no cover - typer without the click package
+        pass
+    if hasattr(typer, "TyperException"):
+        found.append(typer.TyperException)
+    return tuple(found)
+
+
 def main():
-    """Console entry point: one-line errors unless --debug."""
+    """Console entry point: one-line errors (bad input and bad options alike) unless --debug."""
     debug = "--debug" in sys.argv[1:]
     try:
-        app()
+        code = app(standalone_mode=False)  # click usage errors reach us instead of a boxed message
     except TanbenchError as exc:
         if debug:
             raise
@@ -274,11 +300,23 @@ def main():
             raise
         typer.echo("interrupted", err=True)
         sys.exit(130)
+    except typer.Abort:
+        typer.echo("aborted", err=True)
+        sys.exit(1)
+    except _usage_error_types() as exc:
+        if type(exc).__name__ == "NoArgsIsHelpError" or not hasattr(exc, "format_message"):
+            exc.show()  # a bare `tanbench` (or group) prints its help
+        else:
+            ctx = getattr(exc, "ctx", None)
+            hint = f" (see: {ctx.command_path} --help)" if ctx is not None else ""
+            typer.echo(f"error: {exc.format_message()}{hint}", err=True)
+        sys.exit(getattr(exc, "exit_code", 2))
     except Exception as exc:  # noqa: BLE001 - the last line of defence against tracebacks
         if debug:
             raise
         typer.echo(f"error: unexpected {type(exc).__name__}: {exc} (run with --debug for the traceback)", err=True)
         sys.exit(1)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

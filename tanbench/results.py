@@ -1,9 +1,12 @@
 """Results as pandas: load runs and series, summarise, build the paper-style tables.
 
-``load(DIR)`` returns the tidy runs table (one row per cell, method and run; columns
-documented in docs/results.md), ``load_series(DIR)`` the per-update series (the Monte
-Carlo summary by default), ``summarize(df, by=...)`` the statistics the tables show.
-``build_outputs`` writes ``series/summary.parquet`` and ``tables/`` for a sweep.
+``load(DIR)`` returns the tidy runs table (one row per cell, method and run: the
+sweep, cell_id, tables, method, run, seeds, every scenario parameter as a flat column,
+the metrics, status, error and wall_s); it is exactly ``pd.read_parquet(DIR / "runs")``,
+after checking that every file is tanbench's, of this schema. ``load_series(DIR)`` gives
+the per-update series (the Monte Carlo summary by default), ``summarize(df, by=...)``
+the statistics the tables show. ``build_outputs`` writes ``series/summary.parquet`` and
+``tables/`` for a sweep.
 """
 
 from __future__ import annotations
@@ -36,9 +39,9 @@ def load(directory, status: str | None = None) -> pd.DataFrame:
         raise TanbenchError(f"{directory}: no such results directory")
     files = store.run_files(directory)
     if not files:
-        raise TanbenchError(f"{directory}: no runs stored (expected {directory}/runs/cell_id=*/run-*.parquet)")
-    frames = [store.read_parquet(f) for f in files]
-    df = pd.concat(frames, ignore_index=True)
+        raise TanbenchError(f"{directory}: no runs stored (expected {directory}/runs/<cell_id>/run-*.parquet)")
+    store.check_files(files)
+    df = store.read_dataset(directory / "runs")
     if status is not None:
         df = df[df["status"] == status].reset_index(drop=True)
     return df
@@ -53,16 +56,11 @@ def load_series(directory, kind: str = "summary") -> pd.DataFrame:
             raise TanbenchError(f"{directory}: no series summary (was the sweep run with --series none?)")
         return store.read_parquet(path)
     if kind == "runs":
-        files = _files(directory / "series" / "runs", "cell_id=*/run-*.parquet")
+        files = _files(directory / "series" / "runs", "*/run-*.parquet")
         if not files:
             raise TanbenchError(f"{directory}: no per-run series (run the sweep with --series full)")
-        frames = []
-        for f in files:
-            df = store.read_parquet(f)
-            df.insert(0, "run", int(f.stem.split("-")[1]))
-            df.insert(0, "cell_id", f.parent.name.split("=", 1)[1])
-            frames.append(df)
-        return pd.concat(frames, ignore_index=True)
+        store.check_files(files)
+        return store.read_dataset(directory / "series" / "runs")
     raise TanbenchError(f"unknown series kind {kind!r} (summary or runs)")
 
 
@@ -161,12 +159,9 @@ def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
     if series != "none":
         base = out / ("series/runs" if series == "full" else ".work/series")
         frames = []
-        for f in _files(base, "cell_id=*/run-*.parquet"):
-            cell_id = f.parent.name.split("=", 1)[1]
-            if cell_id in ids:
-                df = store.read_parquet(f)
-                df.insert(0, "cell_id", cell_id)
-                frames.append(df)
+        for f in _files(base, "*/run-*.parquet"):
+            if f.parent.name in ids:
+                frames.append(store.read_parquet(f))
         if frames:
             store.write_parquet(series_summary(frames), out / "series" / "summary.parquet", meta)
     try:
@@ -177,6 +172,11 @@ def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
     for name, table in tables.items():
         store.write_parquet(table, out / "tables" / f"{name}.parquet", meta)
         store.write_text(to_markdown(table, title=name), out / "tables" / f"{name}.md")
+    # tables/ shows the current sweep: drop the tables (ours only) of designs it no longer has
+    for f in _files(out / "tables", "*.parquet"):
+        if f.stem not in tables and store.is_tanbench_file(f):
+            f.unlink(missing_ok=True)
+            f.with_suffix(".md").unlink(missing_ok=True)
     return tables
 
 

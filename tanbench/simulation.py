@@ -177,7 +177,7 @@ def check_track_on_map(truth: Truth, tmap) -> None:
             f"depth {-u[k]:.1f} m over a {-floor[k]:.1f} m seafloor; raise the trajectory or move it")
 
 
-def vehicle_frame(vehicle: VehicleData, every: int = 1) -> "pd.DataFrame":
+def vehicle_frame(vehicle: VehicleData, every: int = 1):
     """One run's vehicle data as a table at the IMU rate (every ``every``-th sample).
 
     Columns: time; true position and attitude; IMU outputs; held DVL velocity; pressure

@@ -25,8 +25,7 @@ import numpy as np
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import loglik_loose
 from tanbench.filters.propagate import propagate_loose
-from tanbench.filters.resample import (apply_resample, effective_sample_size, normalize_log_weights,
-                                      regularise, resample_indices)
+from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
 
 LOOSE_COLS = np.array([0, 1], dtype=np.int64)
 
@@ -95,19 +94,5 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, z, e0, n0, inv_re, in
             bad = 0
             reinit_out[k] = 1
             continue
-        mx = logw.max()
-        for j in range(m):
-            logw[j] -= mx
-        if ess < ess_thr * m:
-            for j in range(m):
-                uni[j] = rng.random()
-            resample_indices(scheme, w, uni, idx)
-            apply_resample(x, idx, scratch)
-            regularise(x, rng, reg_kind, LOOSE_COLS, reg_size, 2)
-            logw[:] = 0.0
-            spread = math.sqrt(v[0] + v[1])
-            if spread < min_spread:
-                s = min_spread / math.sqrt(2.0)
-                for j in range(m):
-                    x[j, 0] += s * rng.standard_normal()
-                    x[j, 1] += s * rng.standard_normal()
+        resample_and_regularise(x, w, logw, ess, rng, scheme, ess_thr, reg_kind, LOOSE_COLS, reg_size, 2,
+                                math.sqrt(v[0] + v[1]), min_spread, uni, idx, scratch)

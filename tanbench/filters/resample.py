@@ -215,3 +215,28 @@ def regularise(x, rng, kind, cols, size, dim):
     else:
         roughen(x, cols, size, dim, noise)
 
+
+@nb.njit(cache=True)
+def resample_and_regularise(x, w, logw, ess, rng, scheme, ess_thr, reg_kind, reg_cols, reg_size, dim,
+                            spread, min_spread, uni, idx, scratch):
+    """The end of an update, shared by the filters: keep log-weights bounded; if the ESS is
+    below ``ess_thr * M`` resample, regularise ``reg_cols`` and, if the horizontal cloud
+    (columns 0 and 1, std ``spread``) has collapsed below ``min_spread``, re-spread it."""
+    m = x.shape[0]
+    mx = logw.max()
+    for j in range(m):
+        logw[j] -= mx
+    if ess >= ess_thr * m:
+        return
+    for j in range(m):
+        uni[j] = rng.random()
+    resample_indices(scheme, w, uni, idx)
+    apply_resample(x, idx, scratch)
+    regularise(x, rng, reg_kind, reg_cols, reg_size, dim)
+    logw[:] = 0.0
+    if spread < min_spread:
+        s = min_spread / math.sqrt(2.0)
+        for j in range(m):
+            x[j, 0] += s * rng.standard_normal()
+            x[j, 1] += s * rng.standard_normal()
+

@@ -21,7 +21,7 @@ from tanbench.filters.propagate import DIST_NAVIGATION, DIST_NONE, DIST_PARTICLE
 from tanbench.filters.resample import REGULARISATIONS, SCHEMES
 from tanbench.filters.state import N_LOOSE, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.tight import REGULARISED_STATES, init_tight, tight_filter_loop
-from tanbench.navigation.increments import D0E, D0N, compute_increments
+from tanbench.navigation.increments import compute_increments
 from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
 from tanbench.simulation import VehicleData
 from tanbench.terrain import navigation_map

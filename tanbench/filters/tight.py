@@ -30,8 +30,7 @@ import numpy as np
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import loglik_tight
 from tanbench.filters.propagate import propagate_tight
-from tanbench.filters.resample import (apply_resample, effective_sample_size, normalize_log_weights,
-                                      regularise, resample_indices)
+from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
 
 REGULARISED_STATES = {
@@ -103,19 +102,5 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
             bad = 0
             reinit_out[k] = 1
             continue
-        mx = logw.max()
-        for j in range(m):
-            logw[j] -= mx
-        if ess < ess_thr * m:
-            for j in range(m):
-                uni[j] = rng.random()
-            resample_indices(scheme, w, uni, idx)
-            apply_resample(x, idx, scratch)
-            regularise(x, rng, reg_kind, reg_cols, reg_size, N_TIGHT)
-            logw[:] = 0.0
-            spread = math.sqrt(v[E] + v[N])
-            if spread < min_spread:
-                s = min_spread / math.sqrt(2.0)
-                for j in range(m):
-                    x[j, E] += s * rng.standard_normal()
-                    x[j, N] += s * rng.standard_normal()
+        resample_and_regularise(x, w, logw, ess, rng, scheme, ess_thr, reg_kind, reg_cols, reg_size, N_TIGHT,
+                                math.sqrt(v[E] + v[N]), min_spread, uni, idx, scratch)

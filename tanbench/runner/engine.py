@@ -11,17 +11,23 @@ stored for the sweep's current cells.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
+import types
+import typing
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+from pydantic import BaseModel
 
-from tanbench.config import flatten
+from tanbench.config import Scenario, flatten
 from tanbench.errors import TanbenchError
 from tanbench.runner import store
 from tanbench.runner.sweep import Sweep
@@ -93,7 +99,8 @@ def validate_worlds(sweep: Sweep) -> None:
     seen = set()
     for cell in sweep.cells:
         sc = cell.scenario
-        label = f"cell {cell.cell_id} ({', '.join(f'{k}={v}' for k, v in cell.varied.items()) or 'defaults'})"
+        varied = ', '.join(f'{k}={v}' for k, v in cell.varied.items()) or 'defaults'
+        label = f"{sweep.path or sweep.name}: cell {cell.cell_id} ({varied})"
         try:
             world = json.dumps(sc.world_spec(), sort_keys=True)
             if world not in seen:
@@ -116,20 +123,93 @@ def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str =
     return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers())
 
 
-def _row_frame(result: TaskResult, cell_columns: dict, sweep: Sweep) -> pd.DataFrame:
-    rows = []
-    for row in result.rows:
-        rows.append({"sweep": sweep.name, **cell_columns[result.cell_id], **row})
-    return pd.DataFrame(rows)
+# Arrow types of a run row's columns. They are fixed (the scenario parameters' from the
+# Scenario model's annotations), so every run file has the same schema whatever its
+# values (a failed run's missing metrics, a parameter left at None) and
+# ``pd.read_parquet(DIR / "runs")`` can read them together. Metrics not listed are float64.
+ID_TYPES = {"sweep": pa.string(), "cell_id": pa.string(), "tables": pa.string(), "method": pa.string(),
+            "run": pa.int64(), "seed": pa.int64(), "filter_seed": pa.int64()}
+METRIC_TYPES = {"diverged": pa.bool_(), "reinitialisations": pa.int64()}
+TAIL_TYPES = {"status": pa.string(), "error": pa.string(), "wall_s": pa.float64()}
+
+
+def _arrow_type(annotation) -> pa.DataType:
+    """bool, int64, float64, or string (plain for str, JSON text for tuples and mixed types)."""
+    union = typing.get_origin(annotation) in (typing.Union, types.UnionType)
+    kinds = set()
+    for arg in typing.get_args(annotation) if union else (annotation,):
+        if arg is type(None):
+            continue
+        if arg is bool:
+            kinds.add("bool")
+        elif arg is int:
+            kinds.add("int")
+        elif arg is float:
+            kinds.add("float")
+        elif arg is str or typing.get_origin(arg) is typing.Literal:
+            kinds.add("str")
+        else:
+            kinds.add("json")
+    if kinds == {"bool"}:
+        return pa.bool_()
+    if kinds == {"int"}:
+        return pa.int64()
+    if kinds and kinds <= {"int", "float"}:
+        return pa.float64()
+    return pa.string()
+
+
+@lru_cache(maxsize=1)
+def scenario_column_types() -> dict[str, pa.DataType]:
+    """Every flattened scenario parameter (``filter.resampling``) and its Arrow type, in model order."""
+    def walk(model, prefix):
+        out = {}
+        for name, info in model.model_fields.items():
+            ann = info.annotation
+            if isinstance(ann, type) and issubclass(ann, BaseModel):
+                out.update(walk(ann, f"{prefix}{name}."))
+            else:
+                out[f"{prefix}{name}"] = _arrow_type(ann)
+        return out
+
+    return walk(Scenario, "")
+
+
+def run_schema(rows: list[dict]) -> pa.Schema:
+    """The schema of a run file: the known columns in a fixed order, then any other (inferred)."""
+    from tanbench.filters.run import METRIC_COLUMNS
+
+    metrics = {m: METRIC_TYPES.get(m, pa.float64()) for m in METRIC_COLUMNS}
+    known = {**ID_TYPES, **scenario_column_types(), **metrics, **TAIL_TYPES}
+    fields = [pa.field(k, t) for k, t in known.items()]
+    for k in dict.fromkeys(k for row in rows for k in row):
+        if k not in known:
+            inferred = pa.array([row.get(k) for row in rows], from_pandas=True).type
+            fields.append(pa.field(k, pa.float64() if pa.types.is_null(inferred) else inferred))
+    return pa.schema(fields)
+
+
+def _coerce(value, typ: pa.DataType):
+    """A row value as the column's type takes it: NaN is null outside float columns, JSON for lists."""
+    if value is None or (isinstance(value, float) and math.isnan(value) and not pa.types.is_floating(typ)):
+        return None
+    if pa.types.is_string(typ) and not isinstance(value, str):
+        return json.dumps(value)
+    return value
+
+
+def rows_table(rows: list[dict]) -> pa.Table:
+    """Run rows as an Arrow table of the fixed run-file schema."""
+    schema = run_schema(rows)
+    data = {f.name: [_coerce(row.get(f.name), f.type) for row in rows] for f in schema}
+    return pa.Table.from_pydict(data, schema=schema)
 
 
 def cell_columns(sweep: Sweep) -> dict[str, dict]:
     """Per cell: its tables and every scenario parameter as a flat column."""
     out = {}
     for cell in sweep.cells:
-        params = flatten(cell.scenario.normalized())
-        params = {k: (json.dumps(v) if isinstance(v, (list, tuple, dict)) else v) for k, v in params.items()}
-        out[cell.cell_id] = {"tables": ",".join(cell.tables), **params}
+        out[cell.cell_id] = {"tables": ",".join(cell.tables), **flatten(cell.scenario.normalized())}
     return out
 
 
@@ -137,10 +217,12 @@ def store_result(result: TaskResult, plan: Plan, columns: dict, meta: dict, full
     """Write a finished task's rows (and series) atomically."""
     out = plan.out
     if result.series:
-        frames = [pd.DataFrame({"method": m, **s}) for m, s in result.series.items()]
+        frames = [pd.DataFrame({"cell_id": result.cell_id, "run": result.run, "method": m, **s})
+                  for m, s in result.series.items()]
         store.write_parquet(pd.concat(frames, ignore_index=True),
                             store.series_file(out, result.cell_id, result.run, full_series), meta)
-    store.write_parquet(_row_frame(result, columns, plan.sweep), store.run_file(out, result.cell_id, result.run), meta)
+    rows = [{"sweep": plan.sweep.name, **columns[result.cell_id], **row} for row in result.rows]
+    store.write_table(rows_table(rows), store.run_file(out, result.cell_id, result.run), meta)
 
 
 def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: str | None = None,
@@ -149,6 +231,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     from tanbench.results import build_outputs
 
     store.check_writable(out)
+    store.remove_stale_temporaries(out)
     store.check_existing_schema(out)
     validate_worlds(sweep)
     if force:
@@ -174,13 +257,16 @@ def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progres
 
     columns = cell_columns(plan.sweep)
     n_methods = len(plan.sweep.spec.methods)
-    bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
-               dynamic_ncols=True, smoothing=0.05)
     workers = min(plan.workers, len(todo)) if scheduler is None else plan.workers
+    # the executor first: if it cannot start (a Dask address that does not answer), the
+    # user sees its one error line and no half-drawn progress bar
     with open_executor(workers, scheduler) as handle:
-        bar.set_description(f"{plan.sweep.name} on {handle.description}")
-        pending = {handle.executor.submit(execute, task): task for task in todo}
+        bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
+                   dynamic_ncols=True, smoothing=0.05, desc=f"{plan.sweep.name} on {handle.description}")
+        pending = {}
         try:
+            for task in todo:
+                pending[handle.executor.submit(execute, task)] = task
             while pending:
                 done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
                 for fut in done:

@@ -3,16 +3,23 @@
 Layout of ``DIR``::
 
     sweep.yaml                          the sweep that wrote it (tables are built from it)
-    runs/cell_id=<id>/run-<r>.parquet   one file per finished task: a row per method
+    runs/<cell_id>/run-<r>.parquet      one file per finished task: a row per method
     series/summary.parquet              Monte Carlo mean and percentiles over time
-    series/runs/cell_id=<id>/run-<r>.parquet    every run's series (--series full)
+    series/runs/<cell_id>/run-<r>.parquet    every run's series (--series full)
     .work/series/...                    the same, kept out of sight (--series summary)
     tables/<table>.parquet, .md         the paper-style summary tables
 
-Every file is written to a temporary name in its directory and renamed into place, so
-an interrupted sweep never leaves a half-written file, and every Parquet file carries
-the provenance (sweep YAML, root seed, versions, git revision, creation time) and the
-schema version in its schema metadata under the key ``tanbench``.
+Every file is self-describing (its rows carry ``cell_id`` and ``run``) and the run
+files share one fixed schema, so ``pd.read_parquet(DIR / "runs")`` reads them all. The
+directories are not Hive partitions (``cell_id=<id>``) on purpose: a partition column
+would clash with the ``cell_id`` column inside the files.
+
+Every file is written to a temporary name in its directory (``.<name>.<pid>.tmp``) and
+renamed into place, so an interrupted sweep never leaves a half-written file under its
+real name; a sweep deletes the temporaries a killed one left (``remove_stale_temporaries``).
+Every Parquet file carries the provenance (sweep YAML, root seed, versions, git
+revision, creation time) and the schema version in its schema metadata under the key
+``tanbench``.
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ import pyarrow.parquet as pq
 
 from tanbench.errors import TanbenchError
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: runs/<cell_id>/ (was runs/cell_id=<id>/), one fixed run-file schema
 META_KEY = b"tanbench"
 
 
@@ -73,8 +80,12 @@ def provenance(sweep_text: str, sweep_name: str, root_seed: int) -> dict:
 
 def write_parquet(df: pd.DataFrame, path: Path, meta: dict) -> None:
     """Write ``df`` to ``path`` atomically with ``meta`` in the schema metadata."""
+    write_table(pa.Table.from_pandas(df, preserve_index=False), path, meta)
+
+
+def write_table(table: pa.Table, path: Path, meta: dict) -> None:
+    """Write an Arrow ``table`` to ``path`` atomically with ``meta`` in the schema metadata."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    table = pa.Table.from_pandas(df, preserve_index=False)
     merged = dict(table.schema.metadata or {})
     merged[META_KEY] = json.dumps(meta).encode()
     table = table.replace_schema_metadata(merged)
@@ -101,15 +112,27 @@ def read_meta(path: Path) -> dict:
     except (OSError, pa.ArrowException) as exc:
         raise TanbenchError(f"{path}: not a readable Parquet file ({str(exc).splitlines()[0]})") from None
     raw = (schema.metadata or {}).get(META_KEY)
-    if raw is None:
+    try:
+        meta = json.loads(raw) if raw is not None else None
+    except ValueError:
+        meta = None
+    if not isinstance(meta, dict):
         raise TanbenchError(f"{path}: not written by tanbench (no 'tanbench' metadata)")
-    meta = json.loads(raw)
     version = meta.get("schema_version")
     if version != SCHEMA_VERSION:
+        # --force cannot help: it only replaces the current sweep's cells, not the others
         raise TanbenchError(
             f"{path}: written with results schema {version}, this tanbench reads schema {SCHEMA_VERSION}; "
-            f"re-run the sweep with --force or use the tanbench version that wrote it")
+            f"write to a new --out directory (or delete this one), or use the tanbench version that wrote it")
     return meta
+
+
+def is_tanbench_file(path: Path) -> bool:
+    """Whether ``path`` is a Parquet file written by tanbench (any schema version)."""
+    try:
+        return META_KEY in (pq.read_schema(path).metadata or {})
+    except (OSError, pa.ArrowException):
+        return False
 
 
 def read_parquet(path: Path, columns=None) -> pd.DataFrame:
@@ -122,16 +145,31 @@ def read_parquet(path: Path, columns=None) -> pd.DataFrame:
 
 
 def run_file(out: Path, cell_id: str, run: int) -> Path:
-    return out / "runs" / f"cell_id={cell_id}" / f"run-{run:05d}.parquet"
+    return out / "runs" / cell_id / f"run-{run:05d}.parquet"
 
 
 def series_file(out: Path, cell_id: str, run: int, full: bool) -> Path:
     base = out / "series" / "runs" if full else out / ".work" / "series"
-    return base / f"cell_id={cell_id}" / f"run-{run:05d}.parquet"
+    return base / cell_id / f"run-{run:05d}.parquet"
 
 
 def run_files(out: Path) -> list[Path]:
-    return sorted((out / "runs").glob("cell_id=*/run-*.parquet"))
+    """Every stored run file (any ``runs/*/run-*.parquet``, so files of an older layout are seen too)."""
+    return sorted((out / "runs").glob("*/run-*.parquet"))
+
+
+def check_files(paths) -> None:
+    """Check that every file is one of ours, of this schema (one clear error otherwise)."""
+    for path in paths:
+        read_meta(path)
+
+
+def read_dataset(directory: Path) -> pd.DataFrame:
+    """All Parquet files under ``directory`` as one frame: exactly ``pd.read_parquet(directory)``."""
+    try:
+        return pd.read_parquet(directory)
+    except (OSError, pa.ArrowException) as exc:
+        raise TanbenchError(f"{directory}: cannot read the results ({str(exc).splitlines()[0]})") from None
 
 
 def completed_tasks(out: Path) -> set[tuple[str, int]]:
@@ -140,8 +178,41 @@ def completed_tasks(out: Path) -> set[tuple[str, int]]:
     for path in run_files(out):
         df = read_parquet(path, columns=["status"])
         if len(df) and (df["status"] == "ok").all():
-            done.add((path.parent.name.split("=", 1)[1], int(path.stem.split("-")[1])))
+            done.add((path.parent.name, int(path.stem.split("-")[1])))
     return done
+
+
+def remove_stale_temporaries(out: Path) -> list[Path]:
+    """Delete the temporary files (``.<name>.<pid>.tmp``, write probes) of killed writers.
+
+    A sweep killed while writing (SIGKILL, power loss) leaves its temporary file; readers
+    ignore it (``pd.read_parquet`` skips names starting with a dot) but it is clutter.
+    A temporary whose writer process is still alive (another sweep writing into the same
+    directory) is kept.
+    """
+    removed = []
+    if not out.is_dir():
+        return removed
+    for path in [*out.rglob(".*.tmp"), *out.glob(".write-test.*")]:
+        pid = path.name.removesuffix(".tmp").rsplit(".", 1)[-1]
+        if pid.isdigit() and int(pid) != os.getpid() and _alive(int(pid)):
+            continue
+        try:
+            path.unlink()
+            removed.append(path)
+        except OSError:
+            pass
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: alive, someone else's
+        return True
+    return True
 
 
 def check_writable(out: Path) -> None:
@@ -166,4 +237,4 @@ def remove_cells(out: Path, cell_ids) -> None:
     """Delete every stored run and series of these cells (``--force``)."""
     for cell_id in cell_ids:
         for base in (out / "runs", out / "series" / "runs", out / ".work" / "series"):
-            shutil.rmtree(base / f"cell_id={cell_id}", ignore_errors=True)
+            shutil.rmtree(base / cell_id, ignore_errors=True)

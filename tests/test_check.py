@@ -1,0 +1,158 @@
+"""`tanbench check`: statistics of the regression check and its command-line behaviour."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from tanbench.check import CheckOptions, compare, holm
+from tanbench.cli import app, main
+from tanbench.runner import store
+
+BASELINE = Path(__file__).resolve().parents[1] / "results" / "ci-baseline"
+
+
+@pytest.fixture()
+def copy_of_baseline(tmp_path) -> Path:
+    """A writable copy of the committed CI baseline."""
+    dst = tmp_path / "new"
+    shutil.copytree(BASELINE, dst, ignore=shutil.ignore_patterns(".work"))
+    return dst
+
+
+def _rewrite_runs(directory: Path, fn) -> None:
+    """Apply ``fn`` to every stored runs DataFrame, keeping each file's metadata."""
+    for path in store.run_files(directory):
+        meta = store.read_meta(path)
+        df = fn(pq.read_table(path).to_pandas())
+        store.write_parquet(df, path, meta)
+
+
+def test_holm_matches_definition():
+    """Holm adjustment: sorted p times (m - rank), cumulative max, capped at 1."""
+    p = np.array([0.01, 0.04, 0.03, 0.5])
+    np.testing.assert_allclose(holm(p), [0.04, 0.09, 0.09, 0.5])
+
+
+def test_identical_inputs_nothing_regressed():
+    """The baseline against itself: every comparison paired and unchanged."""
+    result = compare(BASELINE, BASELINE)
+    assert not result.regressed
+    assert set(result.table["verdict"]) == {"unchanged"}
+    assert result.table["paired"].all()
+    assert (result.table["change_m"] == 0).all()
+    assert not result.only_new and not result.only_baseline
+
+
+def test_injected_degradation_flags_exactly_that_cell(copy_of_baseline):
+    """Errors x1.5 in one cell: that cell regresses, no other cell does."""
+    runs = store.read_parquet(store.run_files(copy_of_baseline)[0])
+    victim = runs["cell_id"].iloc[0]
+
+    def degrade(df):
+        hit = df["cell_id"] == victim
+        for col in ("final_horizontal_error_m", "mean_horizontal_error_m"):
+            df.loc[hit, col] *= 1.5
+        return df
+
+    _rewrite_runs(copy_of_baseline, degrade)
+    result = compare(copy_of_baseline, BASELINE)
+    flagged = result.table[result.table["verdict"] == "regressed"]
+    assert len(flagged) > 0
+    assert set(flagged["cell_id"]) == {victim}
+    assert result.regressed
+
+
+def test_improvement_is_not_a_regression(copy_of_baseline):
+    """Errors halved everywhere: improvements, and the exit code says nothing regressed."""
+    def improve(df):
+        for col in ("final_horizontal_error_m", "mean_horizontal_error_m"):
+            df[col] *= 0.5
+        return df
+
+    _rewrite_runs(copy_of_baseline, improve)
+    result = compare(copy_of_baseline, BASELINE)
+    assert not result.regressed
+    assert (result.table["verdict"] == "improved").any()
+
+
+def test_unpaired_when_seeds_differ(copy_of_baseline):
+    """Different seeds (other vehicle data): the comparison falls back to the unpaired test."""
+    _rewrite_runs(copy_of_baseline, lambda df: df.assign(seed=df["seed"] + 1))
+    result = compare(copy_of_baseline, BASELINE)
+    assert not result.table["paired"].any()
+    assert not result.regressed
+
+
+def test_mismatched_cells_are_reported(copy_of_baseline):
+    """A cell only in one directory is listed, the others still compared."""
+    victim = store.run_files(copy_of_baseline)[0].parent
+    shutil.rmtree(victim)
+    result = compare(copy_of_baseline, BASELINE)
+    assert len(result.only_baseline) == 1 and victim.name.split("=")[1] in result.only_baseline[0]
+    assert not result.only_new
+    assert victim.name.split("=")[1] not in set(result.table["cell_id"])
+
+
+def test_margin_options_change_the_verdict(copy_of_baseline):
+    """A small uniform degradation passes the default margin but not a zero margin."""
+    def nudge(df):
+        df["final_horizontal_error_m"] += 0.3
+        return df
+
+    _rewrite_runs(copy_of_baseline, nudge)
+    assert not compare(copy_of_baseline, BASELINE).regressed
+    strict = compare(copy_of_baseline, BASELINE, CheckOptions(margin_rel=0.0, margin_abs=0.0))
+    assert strict.regressed
+
+
+def test_cli_exit_codes_and_report(copy_of_baseline, tmp_path):
+    """Exit 0 when nothing regressed, 1 when something did; --report writes md/json/parquet."""
+    runner = CliRunner()
+    ok = runner.invoke(app, ["check", str(copy_of_baseline), str(BASELINE), "--report", str(tmp_path / "r.json")])
+    assert ok.exit_code == 0, ok.output
+    assert "0 regressed" in ok.output
+    assert (tmp_path / "r.json").exists()
+
+    def degrade(df):
+        df["final_horizontal_error_m"] *= 3.0
+        return df
+
+    _rewrite_runs(copy_of_baseline, degrade)
+    for name in ("r.md", "r.parquet"):
+        bad = runner.invoke(app, ["check", str(copy_of_baseline), str(BASELINE), "--report", str(tmp_path / name)])
+        assert bad.exit_code == 1, bad.output
+        assert "regressed" in bad.output
+    assert pd.read_parquet(tmp_path / "r.parquet")["verdict"].eq("regressed").any()
+
+
+def test_corrupt_parquet_is_one_clear_error(copy_of_baseline, capsys, monkeypatch):
+    """A corrupt run file: one 'error:' line naming the file, exit 2, no traceback."""
+    path = store.run_files(copy_of_baseline)[0]
+    path.write_bytes(b"PAR1 this is not parquet")
+    monkeypatch.setattr("sys.argv", ["tanbench", "check", str(copy_of_baseline), str(BASELINE)])
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and path.name in err[0]
+    assert "Traceback" not in err[0]
+
+
+def test_incompatible_schema_is_one_clear_error(copy_of_baseline, capsys, monkeypatch):
+    """Results written with another schema version: refused with one line, exit 2."""
+    path = store.run_files(copy_of_baseline)[0]
+    meta = store.read_meta(path)
+    store.write_parquet(pq.read_table(path).to_pandas(), path, {**meta, "schema_version": 999})
+    monkeypatch.setattr("sys.argv", ["tanbench", "check", str(copy_of_baseline), str(BASELINE)])
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert "schema" in err and err.count("\n") == 1
