@@ -1,0 +1,129 @@
+"""Helpers shared by the sweep-engine and input-handling tests (CLI in a subprocess).
+
+Plain functions, no fixtures: write a sweep YAML from a dict, run ``python -m
+tanbench.cli`` with the project on PYTHONPATH, compare results while ignoring wall
+times. Sweeps are tiny (a few particles, a short run) so a CLI run takes seconds.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+METHODS = ["tight-dvl", "tight-sbe", "loose-dvl"]
+# columns that depend on the machine's speed, not on the inputs
+WALL_COLUMNS = ["wall_s", "filter_wall_s"]
+RUN_COLUMNS = [
+    "sweep", "cell_id", "tables", "method", "run", "seed", "area", "map_resolution_m", "noise_m",
+    "sampling_time_s", "particles", "final_horizontal_error_m", "mean_horizontal_error_m",
+    "final_heading_error_deg", "status", "error", "wall_s",
+]
+TABLE_COLUMNS = ["table", "method", "n_runs", "mean_final_error_m", "min_final_error_m", "max_final_error_m"]
+
+TINY = {
+    "name": "tiny",
+    "seed": 20240601,
+    "runs": 3,
+    "methods": METHODS,
+    "scenario": {"particles": 60, "duration_s": 60},
+    "tables": {"map_resolution": {"map_resolution_m": [10, 20]},
+               "particles": {"particles": [60, 80]}},
+}
+
+
+def sweep_dict(**changes) -> dict:
+    """A copy of the tiny sweep with top-level keys replaced (``scenario=`` merges)."""
+    data = copy.deepcopy(TINY)
+    for key, value in changes.items():
+        if key == "scenario":
+            data["scenario"].update(value)
+        else:
+            data[key] = value
+    return data
+
+
+def write_sweep(path: Path, data: dict) -> Path:
+    """Write ``data`` as a sweep YAML file at ``path``."""
+    path = Path(path)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def cli_env(extra_path: Path | None = None) -> dict:
+    """The environment of a CLI subprocess: tanbench importable, single-threaded numerics."""
+    env = dict(os.environ)
+    parts = [str(extra_path)] if extra_path else []
+    parts.append(str(ROOT))
+    if env.get("PYTHONPATH"):
+        parts.append(env["PYTHONPATH"])
+    env["PYTHONPATH"] = os.pathsep.join(parts)
+    env.update(NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", COLUMNS="200", NO_COLOR="1")
+    return env
+
+
+def cli(*args, timeout: float = 300, extra_path: Path | None = None, cwd=None) -> subprocess.CompletedProcess:
+    """Run ``python -m tanbench.cli ARGS`` and capture its output."""
+    cmd = [sys.executable, "-m", "tanbench.cli", *[str(a) for a in args]]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=cli_env(extra_path),
+                          cwd=cwd or ROOT)
+
+
+def start_cli(*args, stdout=None, stderr=None) -> subprocess.Popen:
+    """Start ``python -m tanbench.cli ARGS`` in its own process group (to signal it and its workers)."""
+    cmd = [sys.executable, "-m", "tanbench.cli", *[str(a) for a in args]]
+    return subprocess.Popen(cmd, env=cli_env(), cwd=ROOT, start_new_session=True, text=True,
+                            stdout=stdout or subprocess.PIPE, stderr=stderr or subprocess.PIPE)
+
+
+def finished_runs(out: Path) -> int:
+    """How many run files (finished tasks) a results directory holds."""
+    return len(list((Path(out) / "runs").glob("*/run-*.parquet")))
+
+
+def wait_for_runs(proc: subprocess.Popen, out: Path, count: int, timeout: float = 240) -> int:
+    """Poll until ``out`` holds at least ``count`` run files (or the process ends); the count seen."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        n = finished_runs(out)
+        if n >= count or proc.poll() is not None:
+            return n
+        time.sleep(0.01)
+    raise AssertionError(f"no {count} finished runs in {out} after {timeout} s")
+
+
+def kill_group(proc: subprocess.Popen, sig=signal.SIGKILL) -> None:
+    """Send ``sig`` to the process group of ``proc`` (the CLI and its worker processes)."""
+    try:
+        os.killpg(proc.pid, sig)
+    except ProcessLookupError:
+        pass
+
+
+def comparable(runs: pd.DataFrame) -> pd.DataFrame:
+    """The runs table without wall times, sorted by (cell, method, run), for exact comparison."""
+    df = runs.drop(columns=[c for c in WALL_COLUMNS if c in runs.columns])
+    return df.sort_values(["cell_id", "method", "run"]).reset_index(drop=True)
+
+
+def assert_same_runs(a: pd.DataFrame, b: pd.DataFrame) -> None:
+    """Identical runs tables (every column but the wall times)."""
+    pd.testing.assert_frame_equal(comparable(a), comparable(b))
+
+
+def load_tables(directory: Path) -> dict[str, pd.DataFrame]:
+    """Every ``tables/*.parquet`` of a results directory, by name."""
+    return {p.stem: pd.read_parquet(p) for p in sorted((Path(directory) / "tables").glob("*.parquet"))}
+
+
+def error_lines(stderr: str) -> list[str]:
+    """The non-empty lines of a stderr text."""
+    return [line for line in stderr.splitlines() if line.strip()]
