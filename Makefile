@@ -21,14 +21,26 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 run: $(VENV)/.installed-run
 	$(TB) run configs/quick.yaml
 
-## test: the test suite
+## test: the test suite, then the CI regression sweep checked against the committed baseline
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest
+	$(TB) run configs/ci.yaml --out results/ci --force --quiet
+	$(TB) check results/ci results/ci-baseline --report results/ci/check.md
+
+## baseline: refresh results/ci-baseline after a deliberate change (say why in the commit message)
+baseline: $(VENV)/.installed-run
+	$(TB) run configs/ci.yaml --out results/ci-baseline --force --quiet
+
+## paper: reproduce Zhou et al. 2017 into results/zhou2017 (runs, tables, figures, REPORT.md)
+paper: $(VENV)/.installed-run
+	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --force --quiet
+	$(TB) plot results/zhou2017
+	$(TB) report results/zhou2017
 
 ## bench: speed figures of the tight-dvl filter (printed, never asserted)
 bench: $(VENV)/.installed-run
 	$(TB) bench
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick results/ci
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -253,6 +253,50 @@ def terrain_stats(
         typer.echo("A flat track (small depth std and slope) is not an error, but TAN has little to work with.")
 
 
+@app.command(help="Compare two results directories: did NEW's error statistics regress from BASELINE? "
+             "Exit 0 nothing regressed, 1 something did, 2 bad input."
+             + EXAMPLE.format("tanbench check results/ci results/ci-baseline --report check.md"))
+def check(
+    new: Path = typer.Argument(..., help="Results directory under test."),
+    baseline: Path = typer.Argument(..., help="Reference results directory."),
+    margin_rel: float = typer.Option(0.10, "--margin-rel", min=0.0, help="Relative margin of the worse/better tests."),
+    margin_abs: float = typer.Option(1.0, "--margin-abs", min=0.0, help="Absolute margin, metres."),
+    alpha: float = typer.Option(0.05, "--alpha", min=1e-9, max=0.5, help="Level after Holm's correction."),
+    report: Optional[Path] = typer.Option(None, "--report", help="Also write the table (.md, .json or .parquet)."),
+):
+    from tanbench.check import CheckOptions, compare, render, write_report
+
+    result = compare(new, baseline, CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha))
+    typer.echo(render(result))
+    if report is not None:
+        write_report(result, report)
+        typer.echo(f"wrote {report}")
+    if result.regressed:
+        raise typer.Exit(1)
+
+
+@app.command(help="Draw the figures of a results directory (PNG under DIR/figures/; needs the plot extra)."
+             + EXAMPLE.format("tanbench plot results/zhou2017"))
+def plot(directory: Path = typer.Argument(..., help="Results directory.")):
+    from tanbench.plot import plot_results
+
+    written = plot_results(directory)
+    typer.echo(f"wrote {len(written)} figure(s) under {directory / 'figures'}")
+
+
+@app.command(help="Write REPORT.md for a reproduction of the paper: tables beside the paper, claims, figures."
+             + EXAMPLE.format("tanbench report results/zhou2017"))
+def report(
+    directory: Path = typer.Argument(..., help="Results directory of configs/zhou2017.yaml."),
+    discussion: Optional[Path] = typer.Option(Path("docs/zhou2017-discussion.md"), "--discussion",
+                                              help="Hand-written discussion appended to the report."),
+):
+    from tanbench.report import write_report
+
+    path = write_report(directory, discussion)
+    typer.echo(f"wrote {path}")
+
+
 @app.command(help="Benchmark the tight-dvl filter (ns per particle-step, run time, numpy ratio)."
              + EXAMPLE.format("tanbench bench --json"))
 def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON object.")):

@@ -33,7 +33,14 @@ def _session_wall(directory: Path) -> str:
     log = directory / "sessions.jsonl"
     if not log.exists():
         return "not recorded"
-    sessions = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
+    sessions = []
+    for line in log.read_text().splitlines():
+        try:
+            sessions.append(json.loads(line))
+        except json.JSONDecodeError:  # a line cut short by a killed session
+            continue
+    if not sessions:
+        return "not recorded"
     full = [s for s in sessions if s.get("tasks_skipped", 1) == 0 and not s.get("interrupted")]
     s = (full or sessions)[-1]
     return (f"{s['wall_s']:.0f} s ({s['wall_s'] / 60:.1f} min) for {s['tasks_run']} tasks on {s['workers']} "

@@ -42,6 +42,8 @@ def load(directory, status: str | None = None) -> pd.DataFrame:
         raise TanbenchError(f"{directory}: no runs stored (expected {directory}/runs/<cell_id>/run-*.parquet)")
     store.check_files(files)
     df = store.read_dataset(directory / "runs")
+    # a kill between writing a cell's merged file and deleting its task files leaves rows twice
+    df = df.drop_duplicates(subset=["cell_id", "method", "run"], keep="last").reset_index(drop=True)
     if status is not None:
         df = df[df["status"] == status].reset_index(drop=True)
     return df
@@ -136,12 +138,15 @@ def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
 
     For each error: the mean, the mean of its absolute value (``_abs_mean``; the same as
     the mean for the horizontal error) and the 5th/50th/95th percentiles; for positions
-    and headings: the mean. ``n_runs`` counts the runs at each time.
+    and headings: the mean; ``filter_std_m_mean``: the mean of the filter's horizontal
+    spread sqrt(var_e + var_n). ``n_runs`` counts the runs at each time.
     """
     allruns = pd.concat(frames, ignore_index=True)
-    allruns = allruns.assign(**{f"{c}_abs": allruns[c].abs() for c in SUMMARY_ERRORS})
+    allruns = allruns.assign(**{f"{c}_abs": allruns[c].abs() for c in SUMMARY_ERRORS},
+                             filter_std_m=np.sqrt(allruns["var_e"] + allruns["var_n"]))
     grouped = allruns.groupby(["cell_id", "method", "t"], sort=True)
-    parts = [grouped[SUMMARY_MEANS].mean(), grouped["t"].size().rename("n_runs")]
+    parts = [grouped[SUMMARY_MEANS].mean(), grouped["t"].size().rename("n_runs"),
+             grouped["filter_std_m"].mean().rename("filter_std_m_mean")]
     for col in SUMMARY_ERRORS:
         g = grouped[col]
         stats = {f"{col}_mean": g.mean(), f"{col}_abs_mean": grouped[f"{col}_abs"].mean()}

@@ -21,6 +21,7 @@ from sweep_support import (
     METHODS, RUN_COLUMNS, TABLE_COLUMNS, assert_same_runs, cli, load_tables, sweep_dict, write_sweep,
 )
 from tanbench import results
+from tanbench.runner import store
 from tanbench.runner.sweep import load_sweep, parse_sweep
 
 N_CELLS = 3  # map_resolution {10, 20} x particles {60, 80}, the (10, 60) cell shared
@@ -105,7 +106,10 @@ def test_cells_shared_by_tables_run_once(base):
     plan = cli("plan", sweep, "--out", out)
     assert f"{N_CELLS} cell(s) x 3 method(s) x {RUNS} run(s) = {N_CELLS * 3 * RUNS} runs in {N_TASKS} task(s)" \
         in plan.stdout
-    assert len(list((out / "runs").glob("*/run-*.parquet"))) == N_TASKS
+    assert len(store.completed_tasks(out)) == N_TASKS
+    # when the session ended, each cell's task files were merged into one file
+    assert len(list((out / "runs").glob("*/runs.parquet"))) == N_CELLS
+    assert not list((out / "runs").glob("*/run-*.parquet"))
     runs = results.load(out)
     shared = runs[(runs["map_resolution_m"] == 10) & (runs["particles"] == 60)]
     assert shared["cell_id"].nunique() == 1 and len(shared) == len(METHODS) * RUNS
@@ -203,7 +207,7 @@ def test_force_recomputes_identically(base, tmp_path):
     """`--force` recomputes every task (files rewritten) and gets the same results."""
     sweep, out = copy_results(base, tmp_path)
     before = results.load(out)
-    some_file = sorted((out / "runs").glob("*/run-*.parquet"))[0]
+    some_file = sorted((out / "runs").glob("*/runs.parquet"))[0]
     stamp = some_file.stat().st_mtime_ns
     proc = cli("run", sweep, "--out", out, "--workers", 2, "-q", "--force")
     assert proc.returncode == 0, proc.stderr

@@ -245,9 +245,31 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     if todo:
         _execute(plan, todo, scheduler, meta, series == "full", progress, report, echo)
     report.wall_s = time.perf_counter() - started
+    log_session(out, report, plan, scheduler)
     if not report.interrupted:
+        store.compact_cells(out, [c.cell_id for c in sweep.cells])
         build_outputs(out, sweep, series)
     return report
+
+
+def log_session(out: Path, report: "RunReport", plan: Plan, scheduler) -> None:
+    """Append this session's wall time and counts to ``DIR/sessions.jsonl`` (for reports)."""
+    import datetime as _dt
+
+    from tanbench import __version__
+
+    entry = {
+        "started": (_dt.datetime.now(_dt.timezone.utc) - _dt.timedelta(seconds=report.wall_s)).isoformat(
+            timespec="seconds"),
+        "wall_s": round(report.wall_s, 2), "tasks_run": report.finished, "tasks_skipped": report.skipped,
+        "failed_rows": report.failed_rows, "interrupted": report.interrupted, "workers": plan.workers,
+        "scheduler": scheduler or "local", "cpu_count": os.cpu_count(), "tanbench_version": __version__,
+    }
+    try:
+        with open(out / "sessions.jsonl", "a") as fh:
+            fh.write(json.dumps(entry) + "\n")
+    except OSError:
+        pass
 
 
 def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progress, report: RunReport, echo):

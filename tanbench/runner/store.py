@@ -154,8 +154,35 @@ def series_file(out: Path, cell_id: str, run: int, full: bool) -> Path:
 
 
 def run_files(out: Path) -> list[Path]:
-    """Every stored run file (any ``runs/*/run-*.parquet``, so files of an older layout are seen too)."""
-    return sorted((out / "runs").glob("*/run-*.parquet"))
+    """Every stored runs file: per-task ``run-*.parquet`` and per-cell ``runs.parquet``."""
+    return sorted(p for p in (out / "runs").glob("*/*.parquet") if not p.name.startswith("."))
+
+
+def compact_cells(out: Path, cell_ids) -> None:
+    """Merge each cell's per-task files into one ``runs/<cell_id>/runs.parquet``.
+
+    One file per finished task keeps a running sweep safe to kill; once a session ends,
+    the cell's rows are gathered into one file (a results directory of 550 tasks then
+    holds 11 files instead of 550, small enough to commit). The merged file is written
+    atomically before the task files are deleted; if a kill falls in between, the rows
+    exist twice and :func:`tanbench.results.load` keeps one copy.
+    """
+    for cell_id in cell_ids:
+        cell_dir = out / "runs" / cell_id
+        parts = sorted(cell_dir.glob("run-*.parquet"))
+        if not parts:
+            continue
+        merged_path = cell_dir / "runs.parquet"
+        sources = ([merged_path] if merged_path.exists() else []) + parts
+        tables = [pq.read_table(p) for p in sources]
+        meta = read_meta(parts[-1])
+        table = pa.concat_tables([t.replace_schema_metadata(None) for t in tables], promote_options="default")
+        df = table.to_pandas().drop_duplicates(subset=["method", "run"], keep="last")
+        df = df.sort_values(["run", "method"], kind="stable").reset_index(drop=True)
+        write_table(pa.Table.from_pandas(df, schema=tables[-1].schema.remove_metadata(), preserve_index=False),
+                    merged_path, meta)
+        for p in parts:
+            p.unlink(missing_ok=True)
 
 
 def check_files(paths) -> None:
@@ -174,12 +201,13 @@ def read_dataset(directory: Path) -> pd.DataFrame:
 
 def completed_tasks(out: Path) -> set[tuple[str, int]]:
     """(cell_id, run) of tasks whose every row finished with status 'ok'."""
-    done = set()
+    done, failed = set(), set()
     for path in run_files(out):
-        df = read_parquet(path, columns=["status"])
-        if len(df) and (df["status"] == "ok").all():
-            done.add((path.parent.name, int(path.stem.split("-")[1])))
-    return done
+        df = read_parquet(path, columns=["run", "status"])
+        for run, status in df.groupby("run")["status"]:
+            key = (path.parent.name, int(run))
+            (done if (status == "ok").all() else failed).add(key)
+    return done - failed
 
 
 def remove_stale_temporaries(out: Path) -> list[Path]:
