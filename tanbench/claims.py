@@ -70,11 +70,6 @@ def _greater(claim: Claim, label: str, a, b, paired=True):
                                f"(Mann-Whitney, n={len(a)}/{len(b)}, p={p:.2g})")
 
 
-def _final_heading(series: pd.DataFrame, cell_id: str, method: str, last_s: float = 60.0) -> float:
-    s = series[(series["cell_id"] == cell_id) & (series["method"] == method)]
-    return float(s.loc[s["t"] >= s["t"].max() - last_s, "heading_error_deg_abs_mean"].mean())
-
-
 def _cell_id(runs: pd.DataFrame, **params) -> str:
     sel = {**DEFAULTS, **params}
     mask = np.ones(len(runs), bool)
@@ -83,50 +78,73 @@ def _cell_id(runs: pd.DataFrame, **params) -> str:
     return str(runs.loc[mask, "cell_id"].iloc[0])
 
 
+def _heading(series: pd.DataFrame, cell_id: str, method: str, column: str, last_s: float = 60.0) -> float:
+    s = series[(series["cell_id"] == cell_id) & (series["method"] == method)]
+    return float(s.loc[s["t"] >= s["t"].max() - last_s, column].mean())
+
+
 def evaluate(runs: pd.DataFrame, series: pd.DataFrame) -> list[Claim]:
-    """Every claim of the paper that the zhou2017 sweep can check."""
+    """Every claim of the paper the zhou2017 sweep can check, split where the paper's
+    sentence makes several checkable statements (so a partial reproduction shows as such)."""
     f = lambda m, **kw: final_errors(runs, m, **kw)  # noqa: E731
     out = []
 
-    c = Claim("1", "Area A, defaults: tight-dvl's mean final error is within the map resolution "
-                   "(paper 9.7 m at 10 m); tight-sbe is clearly worse (50.9 m); loose-dvl is worst (117.9 m).")
+    def claim(key, text):
+        c = Claim(key, text)
+        out.append(c)
+        return c
+
     dvl, sbe, loose = f("tight-dvl"), f("tight-sbe"), f("loose-dvl")
+    c = claim("1a", "Area A, defaults: tight-dvl's mean final error is within the map resolution "
+                    "(paper 9.7 m with a 10 m map).")
     c.check(dvl.mean() <= DEFAULTS["map_resolution_m"], f"tight-dvl mean final error {dvl.mean():.1f} m <= 10 m")
+    c = claim("1b", "Area A, defaults: tight-sbe is clearly worse than tight-dvl (paper 50.9 m against 9.7 m).")
     _greater(c, "tight-sbe worse than tight-dvl", sbe, dvl)
+    c = claim("1c", "Area A, defaults: loose-dvl is the worst (paper 117.9 m).")
     _greater(c, "loose-dvl worse than tight-sbe", loose, sbe)
-    out.append(c)
+    _greater(c, "loose-dvl worse than tight-dvl", loose, dvl)
 
-    c = Claim("2", "tight-dvl's heading error falls from 30 deg to under 2 deg in area A (Figure 7) "
-                   "and only to around 10 deg in area B (Figure 11).")
     a_id, b_id = _cell_id(runs), _cell_id(runs, area="B")
-    ha, hb = _final_heading(series, a_id, "tight-dvl"), _final_heading(series, b_id, "tight-dvl")
-    c.check(ha < 2.0, f"area A: MC mean |heading error| over the last 60 s {ha:.2f} deg < 2 deg")
-    c.check(5.0 <= hb <= 20.0, f"area B: MC mean |heading error| over the last 60 s {hb:.2f} deg, around 10 deg "
-                              f"(5..20)")
-    ra = f("tight-dvl", column="final_heading_error_deg")
-    rb = f("tight-dvl", column="final_heading_error_deg", area="B")
-    _greater(c, "final heading error larger in B than in A", rb, ra, paired=False)
-    out.append(c)
+    c = claim("2a", "Area A: tight-dvl's heading error falls from 30 deg to under 2 deg "
+                    "(Figure 7, the Monte Carlo mean heading).")
+    mean_a = abs(_heading(series, a_id, "tight-dvl", "heading_error_deg_mean"))
+    abs_a = _heading(series, a_id, "tight-dvl", "heading_error_deg_abs_mean")
+    first = series[(series["cell_id"] == a_id) & (series["method"] == "tight-dvl")].iloc[0]
+    start = (first["nav_heading_deg"] - first["truth_heading_deg"] + 180.0) % 360.0 - 180.0
+    c.check(abs(start) >= 25.0, f"initial heading error of the navigation system {start:+.1f} deg")
+    c.check(mean_a < 2.0, f"|MC mean heading error| over the last 60 s {mean_a:.2f} deg < 2 deg "
+                          f"(MC mean of |error|: {abs_a:.2f} deg)")
+    c = claim("2b", "Area B: tight-dvl's heading error falls only to around 10 deg (Figure 11).")
+    mean_b = abs(_heading(series, b_id, "tight-dvl", "heading_error_deg_mean"))
+    abs_b = _heading(series, b_id, "tight-dvl", "heading_error_deg_abs_mean")
+    c.check(5.0 <= abs_b <= 20.0, f"MC mean |heading error| over the last 60 s {abs_b:.2f} deg, around 10 deg "
+                                  f"(5..20; |MC mean error| {mean_b:.2f} deg)")
+    _greater(c, "final heading error larger in B than in A",
+             f("tight-dvl", column="final_heading_error_deg", area="B"),
+             f("tight-dvl", column="final_heading_error_deg"), paired=False)
 
-    c = Claim("3", "Area B (flat): every method is worse than in area A; tight still better than loose.")
-    for m in METHODS:
+    c = claim("3a", "Area B (flat): the tightly coupled methods are worse than in area A.")
+    for m in ("tight-dvl", "tight-sbe"):
         _greater(c, f"{m}: B worse than A", f(m, area="B"), f(m), paired=False)
+    c = claim("3b", "Area B (flat): the loosely coupled method is worse than in area A.")
+    _greater(c, "loose-dvl: B worse than A", f("loose-dvl", area="B"), f("loose-dvl"), paired=False)
+    c = claim("3c", "Area B (flat): tight is still better than loose.")
     for m in ("tight-dvl", "tight-sbe"):
         _greater(c, f"area B: loose-dvl worse than {m}", f("loose-dvl", area="B"), f(m, area="B"))
-    out.append(c)
 
     for key, param, values, text in (
-        ("4a", "map_resolution_m", (10.0, 20.0, 30.0), "Error grows with map resolution 10 -> 20 -> 30 m."),
-        ("4b", "noise_m", (1.0, 2.0, 3.0), "Error grows with measurement noise 1 -> 2 -> 3 m."),
-        ("4c", "sampling_time_s", (1.0, 5.0, 10.0), "Error grows with sampling time 1 -> 5 -> 10 s."),
+        ("4a", "map_resolution_m", (10.0, 20.0, 30.0), "Error grows with map resolution 10 -> 20 -> 30 m"),
+        ("4b", "noise_m", (1.0, 2.0, 3.0), "Error grows with measurement noise 1 -> 2 -> 3 m"),
+        ("4c", "sampling_time_s", (1.0, 5.0, 10.0), "Error grows with sampling time 1 -> 5 -> 10 s"),
+        ("5", "particles", (3000, 2000, 1000), "Error shrinks as particles go 1000 -> 2000 -> 3000"),
     ):
-        c = Claim(key, text + " (every method, each step)")
-        for m in METHODS:
-            for lo, hi in zip(values[:-1], values[1:]):
-                _greater(c, f"{m}: {param} {hi:g} worse than {lo:g}", f(m, **{param: hi}), f(m, **{param: lo}))
-        out.append(c)
+        for group, methods in (("tight", ("tight-dvl", "tight-sbe")), ("loose", ("loose-dvl",))):
+            c = claim(f"{key}-{group}", f"{text}: {', '.join(methods)}, each step.")
+            for m in methods:
+                for lo, hi in zip(values[:-1], values[1:]):
+                    _greater(c, f"{m}: {param} {hi:g} worse than {lo:g}", f(m, **{param: hi}), f(m, **{param: lo}))
 
-    c = Claim("4d", "Sampling time degrades the error most steeply (Table 6 against Tables 4-5).")
+    c = claim("4d", "Sampling time degrades the error most steeply (Table 6 against Tables 4-5).")
     for m in METHODS:
         base = f(m).mean()
         growth = {p: f(m, **{p: v}).mean() / base for p, v in
@@ -135,24 +153,13 @@ def evaluate(runs: pd.DataFrame, series: pd.DataFrame) -> list[Claim]:
         c.check(steepest == "sampling_time_s",
                 f"{m}: error ratio at the worst setting: sampling 10 s x{growth['sampling_time_s']:.2f}, "
                 f"map 30 m x{growth['map_resolution_m']:.2f}, noise 3 m x{growth['noise_m']:.2f}")
-    out.append(c)
 
-    c = Claim("5", "Error shrinks as particles go 1000 -> 2000 -> 3000 (every method, each step).")
-    for m in METHODS:
-        for lo, hi in ((1000, 2000), (2000, 3000)):
-            _greater(c, f"{m}: {lo} particles worse than {hi}", f(m, particles=lo), f(m, particles=hi))
-    out.append(c)
-
-    c = Claim("6", "Vehicle run: the tightly coupled filters converge once the rough terrain starts "
-                   "(about 240 s) and do better than the loosely coupled one after it.")
-    vid = _cell_id(runs, area="vehicle", map_resolution_m=25.0, sampling_time_s=5.0)
+    kw = dict(area="vehicle", map_resolution_m=25.0, sampling_time_s=5.0)
+    vid = _cell_id(runs, **kw)
+    c = claim("6a", "Vehicle run: the tightly coupled filters converge once the rough terrain starts (about 240 s).")
     for m in ("tight-dvl", "tight-sbe"):
         s = series[(series["cell_id"] == vid) & (series["method"] == m)]
-        std = s["filter_std_m_mean"].to_numpy() if "filter_std_m_mean" in s else None
-        if std is None:
-            c.check(False, f"{m}: no filter spread in the series summary")
-            continue
-        t = s["t"].to_numpy()
+        t, std = s["t"].to_numpy(), s["filter_std_m_mean"].to_numpy()
         below = np.nonzero(std < 10.0)[0]
         t_conv = float(t[below[0]]) if below.size else float("nan")
         c.check(180.0 <= t_conv <= 400.0, f"{m}: MC mean filter std first below 10 m at t = {t_conv:.0f} s "
@@ -160,9 +167,8 @@ def evaluate(runs: pd.DataFrame, series: pd.DataFrame) -> list[Claim]:
         before = s.loc[s["t"] < 240, "horizontal_error_m_mean"].mean()
         after = s.loc[s["t"] >= 300, "horizontal_error_m_mean"].mean()
         c.check(after < before, f"{m}: MC mean error {before:.1f} m before 240 s, {after:.1f} m after 300 s")
-    kw = dict(area="vehicle", map_resolution_m=25.0, sampling_time_s=5.0)
+    c = claim("6b", "Vehicle run: the tightly coupled filters end better than the loosely coupled one "
+                    "(Table 9: 73.1 and 95.8 m against 107.2 m).")
     for m in ("tight-dvl", "tight-sbe"):
-        _greater(c, f"vehicle run: loose-dvl time-averaged error above {m}",
-                 f("loose-dvl", column="mean_horizontal_error_m", **kw), f(m, column="mean_horizontal_error_m", **kw))
-    out.append(c)
+        _greater(c, f"vehicle run: loose-dvl final error above {m}", f("loose-dvl", **kw), f(m, **kw))
     return out

@@ -157,7 +157,7 @@ class FilterSpec(_Strict):
     ess_threshold: float = Field(0.5, gt=0, le=1, description="resample when ESS < threshold * N")
     regularisation: Literal["liu-west", "gordon", "none"] = Field(
         "liu-west", description="jitter after resampling: Liu-West shrinkage kernel or Gordon roughening")
-    regularised_states: Literal["position-heading-biases", "biases"] = "position-heading-biases"
+    regularised_states: Literal["position-heading-biases", "heading-biases", "biases"] = "position-heading-biases"
     regularisation_h: float = Field(0.1, gt=0, lt=1, description="Liu-West kernel width h")
     roughening: float = Field(0.2, ge=0, description="Gordon roughening constant K")
     min_spread_m: float = Field(2.0, ge=0, description="cloud std below which positions are re-spread")

@@ -102,6 +102,10 @@ def write_report(directory, discussion: Path | None = None) -> Path:
         "",
         "## The paper's claims",
         "",
+        f"{sum(c.reproduced for c in claims)} of {len(claims)} checkable statements reproduce "
+        f"({', '.join(c.key for c in claims if c.reproduced)}); the others do not "
+        f"({', '.join(c.key for c in claims if not c.reproduced)}). The discussion at the end says why.",
+        "",
         "Each claim is a test in `tests/test_paper_claims.py` on these results (one-sided tests at 1 %; "
         "paired Wilcoxon where runs share their vehicle data, Mann-Whitney otherwise).",
         "",

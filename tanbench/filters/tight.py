@@ -35,6 +35,7 @@ from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
 
 REGULARISED_STATES = {
     "position-heading-biases": np.array([E, N, YAW, BX, BZ], dtype=np.int64),
+    "heading-biases": np.array([YAW, BX, BZ], dtype=np.int64),
     "biases": np.array([BX, BZ], dtype=np.int64),
 }
 
