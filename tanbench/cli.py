@@ -228,7 +228,7 @@ def terrain_stats(
         scenarios = [c.scenario for c in load_sweep(sweep_file).cells]
     else:
         scenarios = [Scenario(area="A"), Scenario(area="B"), Scenario(area="vehicle")]
-    rows, seen = [], set()
+    rows, seen, seams = [], set(), []
     for sc in scenarios:
         key = sc.world_key()
         if key in seen:
@@ -245,12 +245,18 @@ def terrain_stats(
                     pass
         stats = track_statistics(truth, pos[:, :2], maps)
         rows.append({"area": sc.area, "terrain": truth.name, **stats})
+        for seam in truth.meta.get("seams", []):
+            tiles = " / ".join(Path(str(t)).name for t in seam.get("tiles", ()))
+            seams.append(f"seam {tiles} ({seam.get('kind')}): mean step "
+                         f"{seam.get('mean_abs_step', float('nan')):.2f} m, max {seam.get('max_abs_step', float('nan')):.2f} m")
     df = pd.DataFrame(rows)
     if fmt == "json":
         typer.echo(df.to_json(orient="records", indent=1))
     else:
         typer.echo(to_markdown(df, title="seafloor under the track (nadir, 1 Hz)"))
         typer.echo("A flat track (small depth std and slope) is not an error, but TAN has little to work with.")
+        for line in seams:
+            typer.echo(line)
 
 
 @app.command(help="Compare two results directories: did NEW's error statistics regress from BASELINE? "

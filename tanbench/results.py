@@ -37,11 +37,12 @@ def load(directory, status: str | None = None) -> pd.DataFrame:
     directory = Path(directory)
     if not directory.is_dir():
         raise TanbenchError(f"{directory}: no such results directory")
+    store.check_layout(directory)
     files = store.run_files(directory)
     if not files:
-        raise TanbenchError(f"{directory}: no runs stored (expected {directory}/runs/<cell_id>/run-*.parquet)")
+        raise TanbenchError(f"{directory}: no runs stored (expected {directory}/runs/cell_id=<id>/*.parquet)")
     store.check_files(files)
-    df = store.read_dataset(directory / "runs")
+    df = _cell_first(store.read_dataset(directory / "runs"))
     # a kill between writing a cell's merged file and deleting its task files leaves rows twice
     df = df.drop_duplicates(subset=["cell_id", "method", "run"], keep="last").reset_index(drop=True)
     if status is not None:
@@ -58,12 +59,20 @@ def load_series(directory, kind: str = "summary") -> pd.DataFrame:
             raise TanbenchError(f"{directory}: no series summary (was the sweep run with --series none?)")
         return store.read_parquet(path)
     if kind == "runs":
-        files = _files(directory / "series" / "runs", "*/run-*.parquet")
+        files = _files(directory / "series" / "runs", "cell_id=*/run-*.parquet")
         if not files:
             raise TanbenchError(f"{directory}: no per-run series (run the sweep with --series full)")
         store.check_files(files)
-        return store.read_dataset(directory / "series" / "runs")
+        return _cell_first(store.read_dataset(directory / "series" / "runs"))
     raise TanbenchError(f"unknown series kind {kind!r} (summary or runs)")
+
+
+def _cell_first(df: pd.DataFrame) -> pd.DataFrame:
+    """The partition column ``cell_id`` next to the front (pyarrow appends it last)."""
+    cols = list(df.columns)
+    cols.remove("cell_id")
+    at = 1 if cols and cols[0] == "sweep" else 0
+    return df[cols[:at] + ["cell_id"] + cols[at:]]
 
 
 def bootstrap_ci(values: np.ndarray, level: float = 0.95, samples: int = BOOTSTRAP_SAMPLES,
@@ -164,9 +173,9 @@ def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
     if series != "none":
         base = out / ("series/runs" if series == "full" else ".work/series")
         frames = []
-        for f in _files(base, "*/run-*.parquet"):
-            if f.parent.name in ids:
-                frames.append(store.read_parquet(f))
+        for f in _files(base, "cell_id=*/run-*.parquet"):
+            if store.cell_of(f) in ids:
+                frames.append(store.read_parquet(f).assign(cell_id=store.cell_of(f)))
         if frames:
             store.write_parquet(series_summary(frames), out / "series" / "summary.parquet", meta)
     try:

@@ -27,10 +27,10 @@ def copy_of_baseline(tmp_path) -> Path:
 
 
 def _rewrite_runs(directory: Path, fn) -> None:
-    """Apply ``fn`` to every stored runs DataFrame, keeping each file's metadata."""
+    """Apply ``fn(df, cell_id)`` to every stored runs file's rows, keeping its metadata."""
     for path in store.run_files(directory):
         meta = store.read_meta(path)
-        df = fn(pq.read_table(path).to_pandas())
+        df = fn(pq.read_table(path).to_pandas(), store.cell_of(path))
         store.write_parquet(df, path, meta)
 
 
@@ -52,13 +52,12 @@ def test_identical_inputs_nothing_regressed():
 
 def test_injected_degradation_flags_exactly_that_cell(copy_of_baseline):
     """Errors x1.5 in one cell: that cell regresses, no other cell does."""
-    runs = store.read_parquet(store.run_files(copy_of_baseline)[0])
-    victim = runs["cell_id"].iloc[0]
+    victim = store.cell_of(store.run_files(copy_of_baseline)[0])
 
-    def degrade(df):
-        hit = df["cell_id"] == victim
-        for col in ("final_horizontal_error_m", "mean_horizontal_error_m"):
-            df.loc[hit, col] *= 1.5
+    def degrade(df, cell_id):
+        if cell_id == victim:
+            for col in ("final_horizontal_error_m", "mean_horizontal_error_m"):
+                df[col] *= 1.5
         return df
 
     _rewrite_runs(copy_of_baseline, degrade)
@@ -71,7 +70,7 @@ def test_injected_degradation_flags_exactly_that_cell(copy_of_baseline):
 
 def test_improvement_is_not_a_regression(copy_of_baseline):
     """Errors halved everywhere: improvements, and the exit code says nothing regressed."""
-    def improve(df):
+    def improve(df, cell_id):
         for col in ("final_horizontal_error_m", "mean_horizontal_error_m"):
             df[col] *= 0.5
         return df
@@ -84,7 +83,7 @@ def test_improvement_is_not_a_regression(copy_of_baseline):
 
 def test_unpaired_when_seeds_differ(copy_of_baseline):
     """Different seeds (other vehicle data): the comparison falls back to the unpaired test."""
-    _rewrite_runs(copy_of_baseline, lambda df: df.assign(seed=df["seed"] + 1))
+    _rewrite_runs(copy_of_baseline, lambda df, cell_id: df.assign(seed=df["seed"] + 1))
     result = compare(copy_of_baseline, BASELINE)
     assert not result.table["paired"].any()
     assert not result.regressed
@@ -95,14 +94,15 @@ def test_mismatched_cells_are_reported(copy_of_baseline):
     victim = store.run_files(copy_of_baseline)[0].parent
     shutil.rmtree(victim)
     result = compare(copy_of_baseline, BASELINE)
-    assert len(result.only_baseline) == 1 and victim.name in result.only_baseline[0]
+    cell_id = victim.name.split("=", 1)[1]
+    assert len(result.only_baseline) == 1 and cell_id in result.only_baseline[0]
     assert not result.only_new
-    assert victim.name not in set(result.table["cell_id"])
+    assert cell_id not in set(result.table["cell_id"])
 
 
 def test_margin_options_change_the_verdict(copy_of_baseline):
     """A small uniform degradation passes the default margin but not a zero margin."""
-    def nudge(df):
+    def nudge(df, cell_id):
         df["final_horizontal_error_m"] += 0.3
         return df
 
@@ -120,7 +120,7 @@ def test_cli_exit_codes_and_report(copy_of_baseline, tmp_path):
     assert "0 regressed" in ok.output
     assert (tmp_path / "r.json").exists()
 
-    def degrade(df):
+    def degrade(df, cell_id):
         df["final_horizontal_error_m"] *= 3.0
         return df
 

@@ -127,7 +127,8 @@ def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str =
 # Scenario model's annotations), so every run file has the same schema whatever its
 # values (a failed run's missing metrics, a parameter left at None) and
 # ``pd.read_parquet(DIR / "runs")`` can read them together. Metrics not listed are float64.
-ID_TYPES = {"sweep": pa.string(), "cell_id": pa.string(), "tables": pa.string(), "method": pa.string(),
+# (``cell_id`` is not among them: it is the Hive partition, in the directory name)
+ID_TYPES = {"sweep": pa.string(), "tables": pa.string(), "method": pa.string(),
             "run": pa.int64(), "seed": pa.int64(), "filter_seed": pa.int64()}
 METRIC_TYPES = {"diverged": pa.bool_(), "reinitialisations": pa.int64()}
 TAIL_TYPES = {"status": pa.string(), "error": pa.string(), "wall_s": pa.float64()}
@@ -217,11 +218,11 @@ def store_result(result: TaskResult, plan: Plan, columns: dict, meta: dict, full
     """Write a finished task's rows (and series) atomically."""
     out = plan.out
     if result.series:
-        frames = [pd.DataFrame({"cell_id": result.cell_id, "run": result.run, "method": m, **s})
-                  for m, s in result.series.items()]
+        frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in result.series.items()]
         store.write_parquet(pd.concat(frames, ignore_index=True),
                             store.series_file(out, result.cell_id, result.run, full_series), meta)
-    rows = [{"sweep": plan.sweep.name, **columns[result.cell_id], **row} for row in result.rows]
+    rows = [{"sweep": plan.sweep.name, **columns[result.cell_id],
+             **{k: v for k, v in row.items() if k != "cell_id"}} for row in result.rows]
     store.write_table(rows_table(rows), store.run_file(out, result.cell_id, result.run), meta)
 
 

@@ -2,17 +2,17 @@
 
 Layout of ``DIR``::
 
-    sweep.yaml                          the sweep that wrote it (tables are built from it)
-    runs/<cell_id>/run-<r>.parquet      one file per finished task: a row per method
-    series/summary.parquet              Monte Carlo mean and percentiles over time
-    series/runs/<cell_id>/run-<r>.parquet    every run's series (--series full)
-    .work/series/...                    the same, kept out of sight (--series summary)
-    tables/<table>.parquet, .md         the paper-style summary tables
+    sweep.yaml                                 the sweep that wrote it (tables are built from it)
+    runs/cell_id=<id>/run-<r>.parquet          one file per finished task: a row per method ...
+    runs/cell_id=<id>/runs.parquet             ... merged into one file per cell when a session ends
+    series/summary.parquet                     Monte Carlo mean and percentiles over time
+    series/runs/cell_id=<id>/run-<r>.parquet   every run's series (--series full)
+    .work/series/cell_id=<id>/...              the same, kept out of sight (--series summary)
+    tables/<table>.parquet, .md                the paper-style summary tables
 
-Every file is self-describing (its rows carry ``cell_id`` and ``run``) and the run
-files share one fixed schema, so ``pd.read_parquet(DIR / "runs")`` reads them all. The
-directories are not Hive partitions (``cell_id=<id>``) on purpose: a partition column
-would clash with the ``cell_id`` column inside the files.
+``runs/`` and ``series/runs/`` are Hive-partitioned by ``cell_id``: the files hold every
+other column (one fixed schema) and the directory name holds the cell, so
+``pd.read_parquet(DIR / "runs")`` reads them all with a ``cell_id`` column.
 
 Every file is written to a temporary name in its directory (``.<name>.<pid>.tmp``) and
 renamed into place, so an interrupted sweep never leaves a half-written file under its
@@ -38,7 +38,7 @@ import pyarrow.parquet as pq
 
 from tanbench.errors import TanbenchError
 
-SCHEMA_VERSION = 2  # 2: runs/<cell_id>/ (was runs/cell_id=<id>/), one fixed run-file schema
+SCHEMA_VERSION = 3  # 3: Hive-partitioned runs/cell_id=<id>/, one fixed run-file schema, merged cells
 META_KEY = b"tanbench"
 
 
@@ -144,22 +144,35 @@ def read_parquet(path: Path, columns=None) -> pd.DataFrame:
         raise TanbenchError(f"{path}: corrupt Parquet file ({str(exc).splitlines()[0]})") from None
 
 
+PARTITION = "cell_id"
+
+
+def cell_dir(base: Path, cell_id: str) -> Path:
+    """The Hive partition directory of a cell under ``base``."""
+    return base / f"{PARTITION}={cell_id}"
+
+
+def cell_of(path: Path) -> str:
+    """The cell id of a file in a Hive partition directory."""
+    return path.parent.name.split("=", 1)[1]
+
+
 def run_file(out: Path, cell_id: str, run: int) -> Path:
-    return out / "runs" / cell_id / f"run-{run:05d}.parquet"
+    return cell_dir(out / "runs", cell_id) / f"run-{run:05d}.parquet"
 
 
 def series_file(out: Path, cell_id: str, run: int, full: bool) -> Path:
     base = out / "series" / "runs" if full else out / ".work" / "series"
-    return base / cell_id / f"run-{run:05d}.parquet"
+    return cell_dir(base, cell_id) / f"run-{run:05d}.parquet"
 
 
 def run_files(out: Path) -> list[Path]:
     """Every stored runs file: per-task ``run-*.parquet`` and per-cell ``runs.parquet``."""
-    return sorted(p for p in (out / "runs").glob("*/*.parquet") if not p.name.startswith("."))
+    return sorted(p for p in (out / "runs").glob(f"{PARTITION}=*/*.parquet") if not p.name.startswith("."))
 
 
 def compact_cells(out: Path, cell_ids) -> None:
-    """Merge each cell's per-task files into one ``runs/<cell_id>/runs.parquet``.
+    """Merge each cell's per-task files into one ``runs/cell_id=<id>/runs.parquet``.
 
     One file per finished task keeps a running sweep safe to kill; once a session ends,
     the cell's rows are gathered into one file (a results directory of 550 tasks then
@@ -168,11 +181,11 @@ def compact_cells(out: Path, cell_ids) -> None:
     exist twice and :func:`tanbench.results.load` keeps one copy.
     """
     for cell_id in cell_ids:
-        cell_dir = out / "runs" / cell_id
-        parts = sorted(cell_dir.glob("run-*.parquet"))
+        directory = cell_dir(out / "runs", cell_id)
+        parts = sorted(directory.glob("run-*.parquet"))
         if not parts:
             continue
-        merged_path = cell_dir / "runs.parquet"
+        merged_path = directory / "runs.parquet"
         sources = ([merged_path] if merged_path.exists() else []) + parts
         tables = [pq.read_table(p) for p in sources]
         meta = read_meta(parts[-1])
@@ -185,6 +198,17 @@ def compact_cells(out: Path, cell_ids) -> None:
             p.unlink(missing_ok=True)
 
 
+def check_layout(out: Path) -> None:
+    """Refuse Parquet files under ``runs/`` outside this layout (older tanbench versions):
+    their metadata names the schema that wrote them, which is the clearest message."""
+    ours = set(run_files(out))
+    for path in sorted((out / "runs").rglob("*.parquet")):
+        if path not in ours and not path.name.startswith("."):
+            read_meta(path)
+            raise TanbenchError(f"{path}: not in this tanbench's results layout (runs/cell_id=<id>/*.parquet); "
+                                f"write to a new --out directory or delete this one")
+
+
 def check_files(paths) -> None:
     """Check that every file is one of ours, of this schema (one clear error otherwise)."""
     for path in paths:
@@ -192,9 +216,17 @@ def check_files(paths) -> None:
 
 
 def read_dataset(directory: Path) -> pd.DataFrame:
-    """All Parquet files under ``directory`` as one frame: exactly ``pd.read_parquet(directory)``."""
+    """A Hive-partitioned tree of our files as one frame, ``cell_id`` as a string column.
+
+    The same as ``pd.read_parquet(directory)``, except that the partition column is typed
+    as a string explicitly (pandas' inference would turn an all-digit id into a number).
+    """
+    import pyarrow.dataset as ds
+
     try:
-        return pd.read_parquet(directory)
+        dataset = ds.dataset(directory, format="parquet",
+                             partitioning=ds.partitioning(pa.schema([(PARTITION, pa.string())]), flavor="hive"))
+        return dataset.to_table().to_pandas()
     except (OSError, pa.ArrowException) as exc:
         raise TanbenchError(f"{directory}: cannot read the results ({str(exc).splitlines()[0]})") from None
 
@@ -205,7 +237,7 @@ def completed_tasks(out: Path) -> set[tuple[str, int]]:
     for path in run_files(out):
         df = read_parquet(path, columns=["run", "status"])
         for run, status in df.groupby("run")["status"]:
-            key = (path.parent.name, int(run))
+            key = (cell_of(path), int(run))
             (done if (status == "ok").all() else failed).add(key)
     return done - failed
 
@@ -256,6 +288,7 @@ def check_writable(out: Path) -> None:
 
 def check_existing_schema(out: Path) -> None:
     """Refuse to add to a results directory written with another schema."""
+    check_layout(out)
     files = run_files(out)
     if files:
         read_meta(files[0])
@@ -265,4 +298,4 @@ def remove_cells(out: Path, cell_ids) -> None:
     """Delete every stored run and series of these cells (``--force``)."""
     for cell_id in cell_ids:
         for base in (out / "runs", out / "series" / "runs", out / ".work" / "series"):
-            shutil.rmtree(base / cell_id, ignore_errors=True)
+            shutil.rmtree(cell_dir(base, cell_id), ignore_errors=True)
