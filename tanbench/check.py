@@ -28,6 +28,7 @@ import pandas as pd
 from scipy import stats
 
 from tanbench.errors import TanbenchError
+from tanbench.results import TABLE_SCENARIO_COLUMNS
 
 METRICS = {"final": "final_horizontal_error_m", "time-avg": "mean_horizontal_error_m"}
 RESULT_COLUMNS = {
@@ -36,7 +37,6 @@ RESULT_COLUMNS = {
     "convergence_time_s", "diverged", "reinitialisations", "final_east_error_m", "final_north_error_m",
     "filter_wall_s",
 }
-LABEL_COLUMNS = ["area", "map_resolution_m", "noise_m", "sampling_time_s", "particles"]
 
 
 @dataclass
@@ -99,7 +99,7 @@ def _cell_keys(runs: pd.DataFrame, cols: list[str]) -> pd.Series:
 
 def _label(row: pd.Series) -> str:
     return ", ".join(f"{c}={row[c]:g}" if isinstance(row[c], (int, float, np.number)) else f"{c}={row[c]}"
-                     for c in LABEL_COLUMNS if c in row)
+                     for c in TABLE_SCENARIO_COLUMNS if c in row)
 
 
 def _bootstrap_diff(new: np.ndarray, base: np.ndarray, paired: bool, n: int, rng) -> tuple[float, float]:
