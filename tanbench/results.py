@@ -137,7 +137,8 @@ def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
         summary = summarize(sub, by=cols + ["method"])
         summary.insert(0, "table", table)
         summary["_m"] = summary["method"].map(method_order)
-        summary = summary.sort_values(cols[1:] + ["_m"], kind="stable").drop(columns="_m")
+        varied = [p for p in params if p in summary.columns]
+        summary = summary.sort_values(varied + ["_m"], kind="stable").drop(columns="_m")
         out[table] = summary.reset_index(drop=True)
     return out
 
