@@ -136,11 +136,24 @@ def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
             continue
         summary = summarize(sub, by=cols + ["method"])
         summary.insert(0, "table", table)
+        # rows in the order the sweep file lists the design's values, then its methods
+        design = sweep.spec.grid if table == "grid" else sweep.spec.tables.get(table, {})
+        ranks = []
+        for i, p in enumerate(q for q in params if q in summary.columns):
+            ranks.append(f"_r{i}")
+            summary[ranks[-1]] = summary[p].map(lambda v, values=design.get(p, []): _design_rank(values, v))
         summary["_m"] = summary["method"].map(method_order)
-        varied = [p for p in params if p in summary.columns]
-        summary = summary.sort_values(varied + ["_m"], kind="stable").drop(columns="_m")
+        summary = summary.sort_values(ranks + ["_m"], kind="stable").drop(columns=ranks + ["_m"])
         out[table] = summary.reset_index(drop=True)
     return out
+
+
+def _design_rank(values: list, value) -> int:
+    """Position of ``value`` in a design's list of values (unlisted values go last)."""
+    for i, listed in enumerate(values):
+        if listed == value:
+            return i
+    return len(values)
 
 
 def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
