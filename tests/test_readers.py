@@ -270,6 +270,22 @@ def test_netcdf4_via_h5py(tmp_path):
     assert_plane(read_grid(path))
 
 
+def test_netcdf4_with_dimension_scales(tmp_path):
+    """A NetCDF-4 file as the netCDF library writes it: lon/lat dimension scales attached
+    to a 2-D ``elevation`` variable (DIMENSION_LIST references), rows north to south."""
+    h5py = pytest.importorskip("h5py")
+    path = tmp_path / "gmt4.grd"
+    with h5py.File(path, "w") as f:
+        f["x"] = E
+        f["y"] = N[::-1]
+        for name in ("x", "y"):
+            f[name].make_scale(name)
+        f["elevation"] = Z[::-1]
+        f["elevation"].dims[0].attach_scale(f["y"])
+        f["elevation"].dims[1].attach_scale(f["x"])
+    assert_plane(read_grid(path, format="netcdf"))
+
+
 def test_garbage_netcdf(tmp_path):
     path = tmp_path / "junk.nc"
     path.write_bytes(b"CDF\x01garbage")
