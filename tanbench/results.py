@@ -216,6 +216,13 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _fmt_ratio(v) -> str:
+    """Ratios (ours / paper) with two decimals, so 0.30 and 0.04 stay comparable."""
+    if isinstance(v, (float, np.floating)) and not np.isnan(v):
+        return f"{v:.2f}"
+    return _fmt(v)
+
+
 def to_markdown(df: pd.DataFrame, title: str | None = None) -> str:
     """A plain GitHub-flavoured Markdown table (no extra dependency)."""
     lines = [f"### {title}", ""] if title else []
@@ -223,5 +230,6 @@ def to_markdown(df: pd.DataFrame, title: str | None = None) -> str:
     lines.append("| " + " | ".join(cols) + " |")
     lines.append("|" + "|".join("---" for _ in cols) + "|")
     for _, row in df.iterrows():
-        lines.append("| " + " | ".join(_fmt(row[c]) for c in cols) + " |")
+        lines.append("| " + " | ".join(_fmt_ratio(row[c]) if c.startswith("ratio") else _fmt(row[c])
+                                       for c in cols) + " |")
     return "\n".join(lines) + "\n"
