@@ -59,11 +59,12 @@ def load_series(directory, kind: str = "summary") -> pd.DataFrame:
             raise TanbenchError(f"{directory}: no series summary (was the sweep run with --series none?)")
         return store.read_parquet(path)
     if kind == "runs":
-        files = _files(directory / "series" / "runs", "cell_id=*/run-*.parquet")
+        base = store.series_dir(directory, full=True)
+        files = _files(base, "cell_id=*/run-*.parquet")
         if not files:
             raise TanbenchError(f"{directory}: no per-run series (run the sweep with --series full)")
         store.check_files(files)
-        return _cell_first(store.read_dataset(directory / "series" / "runs"))
+        return _cell_first(store.read_dataset(base))
     raise TanbenchError(f"unknown series kind {kind!r} (summary or runs)")
 
 
@@ -125,23 +126,23 @@ def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
     runs = runs[runs["cell_id"].isin(ids)]
     out = {}
     method_order = {m: i for i, m in enumerate(sweep.spec.methods)}
-    for table, params in sweep.table_params.items():
+    for table, design in sweep.table_designs.items():
         cells = [c for c in sweep.cells if table in c.tables]
         if not cells:
             continue
         sub = runs[runs["cell_id"].isin({c.cell_id for c in cells})]
-        extra = [p for p in params if p not in TABLE_SCENARIO_COLUMNS]
+        extra = [p for p in design if p not in TABLE_SCENARIO_COLUMNS]
         cols = TABLE_SCENARIO_COLUMNS + [p for p in extra if p in sub.columns]
         if sub.empty:
             continue
         summary = summarize(sub, by=cols + ["method"])
         summary.insert(0, "table", table)
         # rows in the order the sweep file lists the design's values, then its methods
-        design = sweep.spec.grid if table == "grid" else sweep.spec.tables.get(table, {})
         ranks = []
-        for i, p in enumerate(q for q in params if q in summary.columns):
-            ranks.append(f"_r{i}")
-            summary[ranks[-1]] = summary[p].map(lambda v, values=design.get(p, []): _design_rank(values, v))
+        for p, values in design.items():
+            if p in summary.columns:
+                ranks.append(f"_rank_{p}")
+                summary[ranks[-1]] = summary[p].map(lambda v, values=values: _design_rank(values, v))
         summary["_m"] = summary["method"].map(method_order)
         summary = summary.sort_values(ranks + ["_m"], kind="stable").drop(columns=ranks + ["_m"])
         out[table] = summary.reset_index(drop=True)
@@ -150,10 +151,7 @@ def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
 
 def _design_rank(values: list, value) -> int:
     """Position of ``value`` in a design's list of values (unlisted values go last)."""
-    for i, listed in enumerate(values):
-        if listed == value:
-            return i
-    return len(values)
+    return values.index(value) if value in values else len(values)
 
 
 def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
@@ -185,9 +183,8 @@ def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
     ids = {c.cell_id for c in sweep.cells}
     if series != "none":
-        base = out / ("series/runs" if series == "full" else ".work/series")
         frames = []
-        for f in _files(base, "cell_id=*/run-*.parquet"):
+        for f in _files(store.series_dir(out, series == "full"), "cell_id=*/run-*.parquet"):
             if store.cell_of(f) in ids:
                 frames.append(store.read_parquet(f).assign(cell_id=store.cell_of(f)))
         if frames:

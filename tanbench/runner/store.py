@@ -85,23 +85,25 @@ def write_parquet(df: pd.DataFrame, path: Path, meta: dict) -> None:
 
 def write_table(table: pa.Table, path: Path, meta: dict) -> None:
     """Write an Arrow ``table`` to ``path`` atomically with ``meta`` in the schema metadata."""
-    path.parent.mkdir(parents=True, exist_ok=True)
     merged = dict(table.schema.metadata or {})
     merged[META_KEY] = json.dumps(meta).encode()
     table = table.replace_schema_metadata(merged)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
-        pq.write_table(table, fh, compression="zstd")
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    _write_atomically(path, lambda fh: pq.write_table(table, fh, compression="zstd"))
 
 
 def write_text(text: str, path: Path) -> None:
     """Write a text file atomically."""
+    _write_atomically(path, lambda fh: fh.write(text.encode()))
+
+
+def _write_atomically(path: Path, write) -> None:
+    """``write(binary file)`` into a temporary ``.<name>.<pid>.tmp``, synced, then renamed to ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
+    with open(tmp, "wb") as fh:
+        write(fh)
+        fh.flush()
+        os.fsync(fh.fileno())
     os.replace(tmp, path)
 
 
@@ -161,9 +163,13 @@ def run_file(out: Path, cell_id: str, run: int) -> Path:
     return cell_dir(out / "runs", cell_id) / f"run-{run:05d}.parquet"
 
 
+def series_dir(out: Path, full: bool) -> Path:
+    """Where per-run series live: ``series/runs`` (--series full) or ``.work/series`` (summary)."""
+    return out / "series" / "runs" if full else out / ".work" / "series"
+
+
 def series_file(out: Path, cell_id: str, run: int, full: bool) -> Path:
-    base = out / "series" / "runs" if full else out / ".work" / "series"
-    return cell_dir(base, cell_id) / f"run-{run:05d}.parquet"
+    return cell_dir(series_dir(out, full), cell_id) / f"run-{run:05d}.parquet"
 
 
 def run_files(out: Path) -> list[Path]:
@@ -297,5 +303,5 @@ def check_existing_schema(out: Path) -> None:
 def remove_cells(out: Path, cell_ids) -> None:
     """Delete every stored run and series of these cells (``--force``)."""
     for cell_id in cell_ids:
-        for base in (out / "runs", out / "series" / "runs", out / ".work" / "series"):
+        for base in (out / "runs", series_dir(out, True), series_dir(out, False)):
             shutil.rmtree(cell_dir(base, cell_id), ignore_errors=True)

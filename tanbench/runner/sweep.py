@@ -79,7 +79,7 @@ class Sweep:
     text: str
     path: Path | None
     cells: list[Cell]
-    table_params: dict[str, list[str]]
+    table_designs: dict[str, dict[str, list]]  # per table: its varied parameters and their values, in file order
 
     @property
     def name(self) -> str:
@@ -87,7 +87,7 @@ class Sweep:
 
     def with_runs(self, runs: int) -> "Sweep":
         spec = self.spec.model_copy(update={"runs": runs})
-        return Sweep(spec, self.text, self.path, self.cells, self.table_params)
+        return Sweep(spec, self.text, self.path, self.cells, self.table_designs)
 
 
 def load_sweep(path) -> Sweep:
@@ -119,8 +119,8 @@ def parse_sweep(text: str, label: str = "<sweep>", path: Path | None = None) -> 
         raise TanbenchError(f"{label}: {format_validation_error(exc)}") from None
     except TypeError as exc:
         raise TanbenchError(f"{label}: {exc}") from None
-    cells, table_params = expand(spec, label)
-    return Sweep(spec=spec, text=text, path=path, cells=cells, table_params=table_params)
+    cells, table_designs = expand(spec, label)
+    return Sweep(spec=spec, text=text, path=path, cells=cells, table_designs=table_designs)
 
 
 def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
@@ -171,13 +171,13 @@ def expand(spec: SweepSpec, label: str) -> tuple[list[Cell], dict[str, list[str]
         designs = [("default", {})]
     make_scenario(spec.scenario, {}, label, "scenario.")  # the defaults alone must be valid
     cells: dict[str, Cell] = {}
-    table_params: dict[str, list[str]] = {}
+    table_designs: dict[str, dict[str, list]] = {}
     for table, design in designs:
         for key, values in design.items():
             if not values:
                 raise TanbenchError(f"{label}: {table}.{key}: needs at least one value")
         keys = list(design)
-        table_params[table] = [k for k in keys if len(design[k]) > 1] or keys
+        table_designs[table] = {k: v for k, v in design.items() if len(v) > 1} or dict(design)
         for combo in itertools.product(*(design[k] for k in keys)):
             overrides = dict(zip(keys, combo))
             where = f"{'tables.' if table != 'grid' else ''}{table}: "
@@ -188,4 +188,4 @@ def expand(spec: SweepSpec, label: str) -> tuple[list[Cell], dict[str, list[str]
                 cell.tables.append(table)
             for k, v in overrides.items():
                 cell.varied.setdefault(k, v)
-    return list(cells.values()), table_params
+    return list(cells.values()), table_designs
