@@ -15,23 +15,23 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from tanbench.filters import METHODS
 from tanbench.paperdata import table_9, tables_3_7
+from tanbench.results import TABLE_SCENARIO_COLUMNS
 
 ALPHA = 0.01
-SCENARIO_COLUMNS = ["area", "map_resolution_m", "noise_m", "sampling_time_s", "particles"]
 
 
 def _paper():
     """The paper's Table 3 (its defaults and mean final errors) and Table 9, by method."""
     t = tables_3_7()
     t3 = t[t["table"] == 3].set_index("method")
-    defaults = {c: t3.iloc[0][c] for c in SCENARIO_COLUMNS}
+    defaults = {c: t3.iloc[0][c] for c in TABLE_SCENARIO_COLUMNS}
     defaults = {k: (v.item() if hasattr(v, "item") else v) for k, v in defaults.items()}
     return defaults, t3["mean_final_error_m"].to_dict(), table_9().set_index("method")["mean_final_error_m"].to_dict()
 
 
 DEFAULTS, PAPER_TABLE3, PAPER_TABLE9 = _paper()
-METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")
 
 
 @dataclass
@@ -50,11 +50,16 @@ class Claim:
 
 def final_errors(runs: pd.DataFrame, method: str, column: str = "final_horizontal_error_m", **params) -> pd.Series:
     """Per-run values of ``column`` for ``method`` in the cell given by ``params`` over the defaults."""
-    sel = {**DEFAULTS, **params}
-    mask = (runs["method"] == method) & (runs["status"] == "ok")
-    for k, v in sel.items():
-        mask &= runs[k] == v
+    mask = _cell_mask(runs, **params) & (runs["method"] == method).to_numpy() & (runs["status"] == "ok").to_numpy()
     return runs.loc[mask].set_index("run")[column].sort_index()
+
+
+def _cell_mask(runs: pd.DataFrame, **params) -> np.ndarray:
+    """Rows of the cell given by ``params`` over the paper's defaults."""
+    mask = np.ones(len(runs), bool)
+    for k, v in {**DEFAULTS, **params}.items():
+        mask &= (runs[k] == v).to_numpy()
+    return mask
 
 
 def paired_greater(a: pd.Series, b: pd.Series) -> tuple[float, float, int]:
@@ -85,11 +90,7 @@ def _greater(claim: Claim, label: str, a, b, paired=True):
 
 
 def _cell_id(runs: pd.DataFrame, **params) -> str:
-    sel = {**DEFAULTS, **params}
-    mask = np.ones(len(runs), bool)
-    for k, v in sel.items():
-        mask &= (runs[k] == v).to_numpy()
-    return str(runs.loc[mask, "cell_id"].iloc[0])
+    return str(runs.loc[_cell_mask(runs, **params), "cell_id"].iloc[0])
 
 
 def _heading(series: pd.DataFrame, cell_id: str, method: str, column: str, last_s: float = 60.0) -> float:

@@ -147,17 +147,15 @@ def tables(
     compare_paper: bool = typer.Option(False, "--compare-paper", help="Beside the paper's published values."),
 ):
     from tanbench.results import load, sweep_tables, to_markdown
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.runner.sweep import load_results_sweep
 
     if fmt not in ("md", "csv"):
         raise TanbenchError(f"--format must be md or csv, not {fmt!r}")
-    sweep_path = directory / "sweep.yaml"
-    if not sweep_path.exists():
-        raise TanbenchError(f"{directory}: no sweep.yaml (not a tanbench results directory?)")
-    sweep = load_sweep(sweep_path)
+    sweep = load_results_sweep(directory)
     result = sweep_tables(load(directory), sweep)
     if not result:
-        raise TanbenchError(f"{directory}: no runs of the cells of {sweep_path} are stored (run the sweep first)")
+        raise TanbenchError(f"{directory}: no runs of the cells of {directory / 'sweep.yaml'} are stored "
+                            f"(run the sweep first)")
     if compare_paper:
         from tanbench.paper import compare_with_paper
 

@@ -43,15 +43,12 @@ def representative_cells(sweep) -> list:
 def plot_results(directory) -> list[Path]:
     """Write every figure for ``directory``; returns the files written."""
     from tanbench.results import load_series
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.runner.sweep import load_results_sweep
     from tanbench.terrain import navigation_map
 
     plt = _pyplot()
     directory = Path(directory)
-    sweep_path = directory / "sweep.yaml"
-    if not sweep_path.exists():
-        raise TanbenchError(f"{directory}: no sweep.yaml (not a tanbench results directory?)")
-    sweep = load_sweep(sweep_path)
+    sweep = load_results_sweep(directory)
     series = load_series(directory)
     figdir = directory / "figures"
     figdir.mkdir(parents=True, exist_ok=True)

@@ -11,8 +11,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tanbench.errors import TanbenchError
-
 TITLES = {
     "table3": "Table 3: area A, defaults (10 m map, noise +-1 m, 1 s, 3000 particles)",
     "table4": "Table 4: map resolution",
@@ -75,12 +73,10 @@ def write_report(directory, discussion: Path | None = None) -> Path:
     from tanbench.paper import compare_with_paper
     from tanbench.results import load, load_series, sweep_tables
     from tanbench.runner import store
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.runner.sweep import load_results_sweep
 
     directory = Path(directory)
-    if not (directory / "sweep.yaml").exists():
-        raise TanbenchError(f"{directory}: no sweep.yaml (not a tanbench results directory?)")
-    sweep = load_sweep(directory / "sweep.yaml")
+    sweep = load_results_sweep(directory)
     runs = load(directory)
     meta = store.read_meta(store.run_files(directory)[0])
     tables = compare_with_paper(sweep_tables(runs, sweep))

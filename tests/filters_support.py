@@ -1,8 +1,8 @@
 """Helpers shared by the filter test files (kernels, conformance, statistics).
 
-Kept out of ``conftest.py`` (owned by the foundation tests): plain functions plus a few
-fixtures that the filter test modules import explicitly. Everything is deterministic:
-seeds are fixed constants here.
+Kept out of ``conftest.py`` (owned by the foundation tests): plain functions that the
+filter test modules import explicitly. Everything is deterministic: seeds are fixed
+constants here.
 """
 
 from __future__ import annotations
@@ -11,10 +11,8 @@ import copy
 import math
 
 import numpy as np
-import pytest
 
 from tanbench.config import Scenario
-from tanbench.terrain.grid import Map
 
 KERNEL_SEED = 20170601  # the random inputs of the kernel tests
 VEHICLE_SEED = 4242  # the vehicle run whose increments/map feed the kernel tests
@@ -68,37 +66,3 @@ def assert_same_tree(a, b, path="vehicle"):
         assert math.isnan(b), path
     else:
         assert a == b, path
-
-
-def plane_like(template: Map, height: float) -> Map:
-    """A flat seafloor at ``height`` m (up) with ``template``'s extent and spacing."""
-    return Map(np.full(template.z.shape, float(height)), template.e0, template.n0, template.res_e,
-               template.res_n, name="plane")
-
-
-@pytest.fixture
-def plane_world(monkeypatch):
-    """Replace the truth and navigation seafloors by a flat plane at -90 m (deeper than the track).
-
-    The simulation's world cache is cleared before and after, so no other test sees the plane.
-    """
-    import tanbench.filters.run as run_mod
-    import tanbench.simulation as sim_mod
-    from tanbench.terrain import navigation_map, truth_map
-
-    real_truth = truth_map
-    real_nav = navigation_map
-    height = -90.0
-
-    def fake_truth(spec):
-        return plane_like(real_truth(spec), height)
-
-    def fake_nav(spec, resolution_m):
-        return plane_like(real_nav(spec, resolution_m), height)
-
-    sim_mod.noise_free_world.cache_clear()
-    monkeypatch.setattr(sim_mod, "truth_map", fake_truth)
-    monkeypatch.setattr(run_mod, "navigation_map", fake_nav)
-    yield height
-    monkeypatch.undo()
-    sim_mod.noise_free_world.cache_clear()

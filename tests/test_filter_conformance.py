@@ -18,7 +18,6 @@ import math
 import numpy as np
 import pytest
 
-from filters_support import plane_world  # noqa: F401  (fixture)
 from filters_support import assert_same_tree, series_keys, short_scenario, snapshot
 from tanbench.errors import TanbenchError
 from tanbench.filters import METHODS
@@ -28,6 +27,7 @@ from tanbench.filters.run import METRIC_COLUMNS, run_method
 from tanbench.filters.state import N_TIGHT, YAW
 from tanbench.filters.tight import REGULARISED_STATES
 from tanbench.simulation import simulate_vehicle
+from tanbench.terrain.grid import Map
 
 SEED = 90210
 PERFECT_SENSORS = dict(gyro_turn_on_bias_deg_h=0.0, gyro_bias_instability_deg_h=0.0, gyro_arw_deg_sqrt_h=0.0,
@@ -41,6 +41,40 @@ def vseed(k: int = 0) -> np.random.SeedSequence:
 
 def fseed(k: int = 0, method: str = "tight-dvl") -> np.random.SeedSequence:
     return np.random.SeedSequence(SEED + 1, spawn_key=(k, METHODS.index(method)))
+
+
+def plane_like(template: Map, height: float) -> Map:
+    """A flat seafloor at ``height`` m (up) with ``template``'s extent and spacing."""
+    return Map(np.full(template.z.shape, float(height)), template.e0, template.n0, template.res_e,
+               template.res_n, name="plane")
+
+
+@pytest.fixture
+def plane_world(monkeypatch):
+    """Replace the truth and navigation seafloors by a flat plane at -90 m (deeper than the track).
+
+    The simulation's world cache is cleared before and after, so no other test sees the plane.
+    """
+    import tanbench.filters.run as run_mod
+    import tanbench.simulation as sim_mod
+    from tanbench.terrain import navigation_map, truth_map
+
+    real_truth = truth_map
+    real_nav = navigation_map
+    height = -90.0
+
+    def fake_truth(spec):
+        return plane_like(real_truth(spec), height)
+
+    def fake_nav(spec, resolution_m):
+        return plane_like(real_nav(spec, resolution_m), height)
+
+    sim_mod.noise_free_world.cache_clear()
+    monkeypatch.setattr(sim_mod, "truth_map", fake_truth)
+    monkeypatch.setattr(run_mod, "navigation_map", fake_nav)
+    yield height
+    monkeypatch.undo()
+    sim_mod.noise_free_world.cache_clear()
 
 
 @pytest.fixture(scope="module")

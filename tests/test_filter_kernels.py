@@ -34,6 +34,18 @@ from tanbench.terrain import navigation_map
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy, yaw_to_heading_deg
 
 TOL = dict(rtol=1e-9, atol=1e-9)
+
+
+def assert_loglik_matches(out, best, ref, best_ref):
+    """A likelihood kernel's log-likelihoods and divergence statistic equal its reference's."""
+    assert np.isfinite(out).all()
+    np.testing.assert_allclose(out, ref, **TOL)
+    if np.isinf(best_ref):
+        assert best == np.inf
+    else:
+        assert best == pytest.approx(best_ref, rel=1e-9)
+
+
 SCHEME_IDS = sorted(rs.SCHEMES, key=rs.SCHEMES.get)
 
 
@@ -219,12 +231,7 @@ def test_loglik_tight_matches_numpy(world, sensor, nan_beams, reference):
             out = np.empty(x.shape[0])
             best = lik.loglik_tight(x, beams, ranges, *za, 1.0, 5.0, dist, 0.1, *attitude(ping), out)
             ref, best_ref = lik.loglik_tight_numpy(x, beams, ranges, *za, 1.0, 5.0, dist, 0.1)
-            assert np.isfinite(out).all()
-            np.testing.assert_allclose(out, ref, **TOL)
-            if np.isinf(best_ref):
-                assert best == np.inf
-            else:
-                assert best == pytest.approx(best_ref, rel=1e-9)
+            assert_loglik_matches(out, best, ref, best_ref)
 
 
 def test_loglik_tight_outside_penalty_and_best(world):
@@ -305,12 +312,7 @@ def test_loglik_loose_matches_numpy(world, nan_beams):
         out = np.empty(x.shape[0])
         best = lik.loglik_loose(x, off, up, *za, 1.0, 5.0, out)
         ref, best_ref = lik.loglik_loose_numpy(x, off, up, *za, 1.0, 5.0)
-        assert np.isfinite(out).all()
-        np.testing.assert_allclose(out, ref, **TOL)
-        if np.isinf(best_ref):
-            assert best == np.inf
-        else:
-            assert best == pytest.approx(best_ref, rel=1e-9)
+        assert_loglik_matches(out, best, ref, best_ref)
 
 
 def test_loglik_loose_nan_row_is_no_beam(world):

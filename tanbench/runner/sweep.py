@@ -102,6 +102,14 @@ def load_sweep(path) -> Sweep:
     return parse_sweep(text, str(path), path)
 
 
+def load_results_sweep(directory) -> Sweep:
+    """The sweep a results directory was written by (its copy in ``DIR/sweep.yaml``)."""
+    path = Path(directory) / "sweep.yaml"
+    if not path.exists():
+        raise TanbenchError(f"{directory}: no sweep.yaml (not a tanbench results directory?)")
+    return load_sweep(path)
+
+
 def parse_sweep(text: str, label: str = "<sweep>", path: Path | None = None) -> Sweep:
     """Validate sweep YAML ``text``; ``label`` names it in error messages."""
     try:
