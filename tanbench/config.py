@@ -59,6 +59,12 @@ class TerrainSpec(_Strict):
             raise ValueError("terrain kind 'file' needs a 'path'")
         return self
 
+    def resolved(self, area: str | None = None) -> "TerrainSpec":
+        """This spec with a synthetic ``layout: auto`` resolved for ``area``."""
+        if self.kind != "synthetic" or self.layout != "auto":
+            return self
+        return self.model_copy(update={"layout": "vehicle-run" if area == "vehicle" else "paper"})
+
 
 class TrajectorySpec(_Strict):
     """The vehicle's true path. ``auto`` follows the area: the paper's run or the vehicle run."""
@@ -190,9 +196,7 @@ class Scenario(_Strict):
     def _resolve_area(self):
         facts = scenario_facts()
         vehicle = self.area == "vehicle"
-        if self.terrain.kind == "synthetic" and self.terrain.layout == "auto":
-            object.__setattr__(self, "terrain", self.terrain.model_copy(
-                update={"layout": "vehicle-run" if vehicle else "paper"}))
+        object.__setattr__(self, "terrain", self.terrain.resolved(self.area))
         traj = self.trajectory
         if traj.kind == "auto":
             kind = "vehicle-run" if vehicle else ("survey" if self.area == "custom" else "paper")

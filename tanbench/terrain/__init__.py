@@ -16,10 +16,7 @@ __all__ = ["Map", "truth_map", "navigation_map"]
 
 
 def _key(spec) -> str:
-    data = spec.model_dump(mode="json")
-    if data["kind"] == "synthetic" and data["layout"] == "auto":
-        data["layout"] = "paper"  # what a Scenario resolves it to outside the vehicle area
-    return json.dumps(data, sort_keys=True)
+    return json.dumps(spec.resolved().model_dump(mode="json"), sort_keys=True)
 
 
 def truth_map(spec) -> Map:

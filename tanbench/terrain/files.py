@@ -11,12 +11,15 @@ refused with its location (``simulation.check_track_on_map``).
 from __future__ import annotations
 
 import glob
+from dataclasses import replace
 from pathlib import Path
-
-import numpy as np
 
 from tanbench.errors import TanbenchError
 from tanbench.terrain.grid import Map
+
+
+def _is_glob(item: str) -> bool:
+    return any(ch in item for ch in "*?[")
 
 
 def resolve_paths(path) -> list[Path]:
@@ -24,7 +27,7 @@ def resolve_paths(path) -> list[Path]:
     items = [path] if isinstance(path, str) else list(path)
     out: list[Path] = []
     for item in items:
-        if any(ch in item for ch in "*?["):
+        if _is_glob(item):
             matches = sorted(glob.glob(item))
             if not matches:
                 raise TanbenchError(f"terrain path {item!r} matches no file (from {Path.cwd()})")
@@ -35,20 +38,21 @@ def resolve_paths(path) -> list[Path]:
 
 
 def load_file_terrain(spec) -> Map:
-    """The truth seafloor read from ``spec.path`` (see :class:`tanbench.config.TerrainSpec`)."""
+    """The truth seafloor read from ``spec.path`` (see :class:`tanbench.config.TerrainSpec`).
+
+    One named file is read as it is; several files, or a glob, as tiles of one mosaic.
+    The readers refuse a grid without any valid node.
+    """
     from tanbench.terrain.readers import fill_holes, read_grid, read_tiles
 
     paths = resolve_paths(spec.path)
     options = dict(bounds=spec.bounds, origin=spec.origin, resolution=spec.resolution, rows=spec.rows,
                    crs=spec.crs, nodata=spec.nodata)
-    if len(paths) == 1 and not (isinstance(spec.path, str) and any(c in spec.path for c in "*?[")):
+    if len(paths) == 1 and not (isinstance(spec.path, str) and _is_glob(spec.path)):
         grid = read_grid(paths[0], spec.format, **options)
     else:
         grid, _ = read_tiles(paths, spec.format, **options)
-    if np.isnan(grid.z).all():
-        raise TanbenchError(f"terrain {spec.path}: the map holds no data (every node is no-data)")
-    if spec.fill_holes and np.isnan(grid.z).any():
+    if spec.fill_holes:
         grid = fill_holes(grid)
-    meta = {**grid.meta, "kind": "file", "path": [str(p) for p in paths]}
-    return Map(z=grid.z, e0=grid.e0, n0=grid.n0, res_e=grid.res_e, res_n=grid.res_n,
-               name=f"file:{paths[0].name}" + (f"+{len(paths) - 1}" if len(paths) > 1 else ""), meta=meta)
+    name = f"file:{paths[0].name}" + (f"+{len(paths) - 1}" if len(paths) > 1 else "")
+    return replace(grid, name=name, meta={**grid.meta, "kind": "file", "path": [str(p) for p in paths]})
