@@ -24,7 +24,7 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
     from tanbench.filters.propagate import propagate_tight, propagate_tight_numpy
     from tanbench.filters.resample import (SYSTEMATIC, apply_resample, normalize_log_weights,
                                            normalize_log_weights_numpy, resample_indices, resample_indices_numpy)
-    from tanbench.filters.run import run_method, update_indices
+    from tanbench.methods import run_method, update_indices
     from tanbench.navigation.increments import compute_increments
     from tanbench.simulation import simulate_vehicle
     from tanbench.terrain import navigation_map
@@ -32,7 +32,8 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
     scenario = Scenario(particles=particles)
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(2017))
     run_method(scenario, "tight-dvl", vehicle, np.random.SeedSequence(1))  # compile / load cache
-    rows, upd = update_indices(scenario, vehicle)
+    updates = update_indices(scenario, vehicle.obs)
+    rows, upd = updates.rows, updates.imu
     walls = []
     for r in range(repeats):
         result = run_method(scenario, "tight-dvl", vehicle, np.random.SeedSequence(1 + r))
@@ -44,21 +45,21 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
     rng = np.random.default_rng(5)
     nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
     zargs = nmap.kernel_args()
-    inc = compute_increments(vehicle.truth.dt, vehicle.nav.pos, vehicle.nav.pitch, vehicle.nav.roll,
-                             vehicle.nav.yaw, upd)
+    inc = compute_increments(vehicle.obs.dt, vehicle.obs.nav.pos, vehicle.obs.nav.pitch, vehicle.obs.nav.roll,
+                             vehicle.obs.nav.yaw, upd)
     k = len(upd) // 2
     x0 = np.empty((particles, 8))
     x0[:, 0] = vehicle.truth.pos[upd[k], 0] + rng.uniform(-20, 20, particles)
     x0[:, 1] = vehicle.truth.pos[upd[k], 1] + rng.uniform(-20, 20, particles)
-    x0[:, 2] = vehicle.nav.pos[upd[k], 2]
-    x0[:, 3] = vehicle.nav.pitch[upd[k]]
-    x0[:, 4] = vehicle.nav.roll[upd[k]]
-    x0[:, 5] = vehicle.nav.yaw[upd[k]] + rng.normal(0, 0.1, particles)
+    x0[:, 2] = vehicle.obs.nav.pos[upd[k], 2]
+    x0[:, 3] = vehicle.obs.nav.pitch[upd[k]]
+    x0[:, 4] = vehicle.obs.nav.roll[upd[k]]
+    x0[:, 5] = vehicle.obs.nav.yaw[upd[k]] + rng.normal(0, 0.1, particles)
     x0[:, 6:] = rng.normal(0, 1e-4, (particles, 2))
     noise = rng.standard_normal((particles, 6))
     uni = rng.random(particles)
-    ranges = vehicle.dvl_ranges[rows[k + 1]]
-    beams = vehicle.dvl_beams
+    ranges = vehicle.obs.dvl_ranges[rows[k + 1]]
+    beams = vehicle.obs.dvl_beams
     sig = (0.1, 0.01, math.radians(2 / 60))
 
     def jitted():
@@ -66,9 +67,9 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
         dist = np.zeros((particles, 2))
         ll = np.empty(particles)
         w = np.empty(particles)
-        propagate_tight(x, inc[k], vehicle.nav.yaw[upd[k]], noise, *sig, 1, dist)
-        loglik_tight(x, beams, ranges, *zargs, 1.0, 5.0, dist, 0.1, vehicle.nav.pitch[upd[k + 1]],
-                     vehicle.nav.roll[upd[k + 1]], vehicle.nav.yaw[upd[k + 1]], ll)
+        propagate_tight(x, inc[k], vehicle.obs.nav.yaw[upd[k]], noise, *sig, 1, dist)
+        loglik_tight(x, beams, ranges, *zargs, 1.0, 5.0, dist, 0.1, vehicle.obs.nav.pitch[upd[k + 1]],
+                     vehicle.obs.nav.roll[upd[k + 1]], vehicle.obs.nav.yaw[upd[k + 1]], ll)
         normalize_log_weights(ll, w)
         weighted_estimate(x, w, 5, 0.0, np.empty(8), np.empty(8), np.empty((2, 2)))
         idx = np.empty(particles, dtype=np.int64)
@@ -76,7 +77,7 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
         apply_resample(x, idx, np.empty_like(x))
 
     def reference():
-        x, dist = propagate_tight_numpy(x0, inc[k], vehicle.nav.yaw[upd[k]], noise, *sig, 1)
+        x, dist = propagate_tight_numpy(x0, inc[k], vehicle.obs.nav.yaw[upd[k]], noise, *sig, 1)
         ll, _ = loglik_tight_numpy(x, beams, ranges, *zargs, 1.0, 5.0, dist, 0.1)
         w, _ = normalize_log_weights_numpy(ll)
         weighted_estimate_numpy(x, w, 5, 0.0)

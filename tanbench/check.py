@@ -29,14 +29,9 @@ from scipy import stats
 
 from tanbench.errors import TanbenchError
 from tanbench.results import TABLE_SCENARIO_COLUMNS
+from tanbench.schema import RESULT_COLUMNS
 
 METRICS = {"final": "final_horizontal_error_m", "time-avg": "mean_horizontal_error_m"}
-RESULT_COLUMNS = {
-    "sweep", "cell_id", "tables", "method", "run", "seed", "filter_seed", "status", "error", "wall_s",
-    "final_horizontal_error_m", "mean_horizontal_error_m", "rmse_after_convergence_m", "final_heading_error_deg",
-    "convergence_time_s", "diverged", "reinitialisations", "final_east_error_m", "final_north_error_m",
-    "filter_wall_s",
-}
 
 
 @dataclass

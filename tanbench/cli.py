@@ -139,6 +139,29 @@ def validate(sweep_file: Path = typer.Argument(..., help="Sweep YAML file.")):
                f"{sweep.spec.runs} run(s) per cell)")
 
 
+@app.command("methods", help="List the TAN methods a sweep can name, with their options."
+             + EXAMPLE.format("tanbench methods --options"))
+def methods_command(
+    options: bool = typer.Option(False, "--options", help="Show every option with its default."),
+    extra: list[str] = typer.Argument(None, help="User methods to describe (package.module:function)."),
+):
+    from tanbench.methods.registry import get, names
+
+    for name in [*names(), *(extra or [])]:
+        record = get(name)
+        typer.echo(f"{record.name:<12} {record.summary}")
+        if not options:
+            continue
+        typer.echo(f"{'':<12} states: {', '.join(record.states)}; seed id {record.seed_id}; "
+                   f"plan cost {record.cost_ns:g} ns per unit")
+        if record.options is None:
+            typer.echo(f"{'':<12} options: the scenario's filter.* settings (tanbench validate shows them)")
+            continue
+        for key, info in record.options.model_fields.items():
+            typer.echo(f"{'':<12} method_options.{record.name}.{key} = {info.default!r}"
+                       + (f"  {info.description}" if info.description else ""))
+
+
 @app.command(help="Print the summary tables of a results directory."
              + EXAMPLE.format("tanbench tables results/zhou2017 --compare-paper"))
 def tables(
@@ -190,7 +213,7 @@ def simulate(
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(seed))
     df = vehicle_frame(vehicle, every)
     err = np.hypot(df["nav_e"] - df["truth_e"], df["nav_n"] - df["truth_n"])
-    typer.echo(f"area {area}, seed {seed}: {df['t'].iloc[-1]:.0f} s, {len(vehicle.ping_idx)} sonar pings; "
+    typer.echo(f"area {area}, seed {seed}: {df['t'].iloc[-1]:.0f} s, {len(vehicle.obs.ping_idx)} sonar pings; "
                f"navigation system final horizontal error {err.iloc[-1]:.1f} m (max {err.max():.1f} m), "
                f"heading error {vehicle.initial_heading_error_deg:+.0f} deg at start, "
                f"{(df['nav_heading_deg'] - df['truth_heading_deg'] + 180).mod(360).iloc[-1] - 180:+.1f} deg at end")

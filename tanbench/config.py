@@ -10,18 +10,44 @@ trajectory, sensors, initial navigation errors); cells that share it share their
 vehicle data (common random numbers). The range-noise level ``noise_m`` is left out on
 purpose: noise is drawn as unit uniforms and scaled, so cells that differ only in
 noise share their random numbers too (and the simulation uses ``noise_m`` itself).
-``cell_key()`` hashes everything.
+``cell_key()`` hashes everything that can change a run's outcome.
+
+Identities survive new options: an option added with :func:`new_option` is left out of
+the keys while it holds its *neutral* value (the value that reproduces the behaviour
+from before the option existed), so adding a defaulted option changes no cell key, no
+seed and no stored result. Changing what a model does without an option is marked by
+bumping :data:`MODEL_VERSION`, which enters every key once it is above 1.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from tanbench.options import DISTANCE_INNOVATION, REGULARISATION, REGULARISED_STATES, RESAMPLING, choices
 from tanbench.paperdata import scenario_facts
+
+# Bump when a model's behaviour changes without a new option (the commit says why): every
+# cell key then changes, so no stored run is reused for results that would differ.
+MODEL_VERSION = 1
+_SAME = object()
+
+
+def new_option(default, *, neutral=_SAME, **field_kwargs):
+    """A pydantic ``Field`` for an option added after results were stored.
+
+    ``neutral`` (default: ``default``) is the value under which the model behaves as it
+    did before the option existed; while a scenario holds it, the option is left out of
+    :meth:`Scenario.cell_key` and :meth:`Scenario.world_key`. To change a recommended
+    default on purpose, give the new ``default`` and keep ``neutral`` at the old
+    behaviour's value: keys then change for every cell that uses the new default.
+    """
+    extra = dict(field_kwargs.pop("json_schema_extra", None) or {})
+    extra["key_neutral"] = json.loads(json.dumps(default if neutral is _SAME else neutral))
+    return Field(default, json_schema_extra=extra, **field_kwargs)
 
 
 class _Strict(BaseModel):
@@ -158,12 +184,12 @@ class FilterSpec(_Strict):
     process_noise_attitude_deg_sqrt_h: float = Field(2.0, ge=0)
     measurement_noise_distance_m: float = Field(0.1, gt=0)
     measurement_noise_altitude_m: float = Field(1.0, gt=0)
-    distance_innovation: Literal["particle", "navigation", "none"] = "particle"
-    resampling: Literal["systematic", "multinomial", "stratified", "residual"] = "systematic"
+    distance_innovation: choices(DISTANCE_INNOVATION) = "particle"
+    resampling: choices(RESAMPLING) = "systematic"
     ess_threshold: float = Field(0.5, gt=0, le=1, description="resample when ESS < threshold * N")
-    regularisation: Literal["liu-west", "gordon", "none"] = Field(
+    regularisation: choices(REGULARISATION) = Field(
         "liu-west", description="jitter after resampling: Liu-West shrinkage kernel or Gordon roughening")
-    regularised_states: Literal["position-heading-biases", "heading-biases", "biases"] = "position-heading-biases"
+    regularised_states: choices(REGULARISED_STATES) = "position-heading-biases"
     regularisation_h: float = Field(0.1, gt=0, lt=1, description="Liu-West kernel width h")
     roughening: float = Field(0.2, ge=0, description="Gordon roughening constant K")
     min_spread_m: float = Field(2.0, ge=0, description="cloud std below which positions are re-spread")
@@ -191,6 +217,8 @@ class Scenario(_Strict):
     sensors: SensorSpec = SensorSpec()
     navigation: NavigationSpec = NavigationSpec()
     filter: FilterSpec = FilterSpec()
+    method_options: dict[str, dict[str, Any]] = new_option(
+        {}, description="per method: its own options (see `tanbench methods`), e.g. {pmf-dvl: {grid_m: 5}}")
 
     @model_validator(mode="after")
     def _resolve_area(self):
@@ -237,19 +265,45 @@ class Scenario(_Strict):
 
     # ---- keys -------------------------------------------------------------------
     def normalized(self) -> dict:
-        """The fully resolved spec as plain JSON-able data (the identity of a cell)."""
+        """The fully resolved spec as plain JSON-able data (every option, neutral ones included)."""
         return json.loads(self.model_dump_json())
 
     def world_spec(self) -> dict:
         """What defines the simulated vehicle data of a run (not the filter's settings)."""
         d = self.normalized()
-        return {k: d[k] for k in ("terrain", "area", "trajectory", "sensors", "navigation", "duration_s")}
+        return {k: d[k] for k in WORLD_SECTIONS}
+
+    def identity(self) -> dict:
+        """What a cell key hashes: the resolved spec without options at their neutral value."""
+        d = _without_neutral(type(self), self.normalized())
+        if MODEL_VERSION > 1:
+            d["model_version"] = MODEL_VERSION
+        return d
 
     def world_key(self) -> str:
-        return stable_hash(self.world_spec())
+        d = self.identity()
+        return stable_hash({k: d[k] for k in (*WORLD_SECTIONS, "model_version") if k in d})
 
     def cell_key(self) -> str:
-        return stable_hash(self.normalized())
+        return stable_hash(self.identity())
+
+
+WORLD_SECTIONS = ("terrain", "area", "trajectory", "sensors", "navigation", "duration_s")
+
+
+def _without_neutral(model: type[BaseModel], data: dict) -> dict:
+    """``data`` (a model's JSON dump) less every :func:`new_option` field at its neutral value."""
+    out = {}
+    for name, value in data.items():
+        info = model.model_fields.get(name)
+        extra = info.json_schema_extra if info is not None and isinstance(info.json_schema_extra, dict) else {}
+        if "key_neutral" in extra and value == extra["key_neutral"]:
+            continue
+        ann = info.annotation if info is not None else None
+        if isinstance(ann, type) and issubclass(ann, BaseModel) and isinstance(value, dict):
+            value = _without_neutral(ann, value)
+        out[name] = value
+    return out
 
 
 def stable_hash(data) -> str:

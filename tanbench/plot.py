@@ -15,8 +15,19 @@ import numpy as np
 
 from tanbench.errors import TanbenchError
 
-COLORS = {"tight-dvl": "tab:red", "tight-sbe": "tab:blue", "loose-dvl": "tab:purple"}
-STYLES = {"tight-dvl": "--", "tight-sbe": "-.", "loose-dvl": ":"}
+# colours for methods whose record names none (user methods), in order of appearance
+SPARE_COLORS = ("tab:green", "tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+
+
+def method_styles(methods) -> dict[str, tuple[str, str]]:
+    """(line style, colour) per method: the registry's plot style, spare colours for the rest."""
+    from tanbench.methods.registry import get
+
+    out, spare = {}, iter(SPARE_COLORS * 4)
+    for m in methods:
+        record = get(m)
+        out[m] = (record.linestyle, record.color or next(spare))
+    return out
 
 
 def _pyplot():
@@ -58,6 +69,7 @@ def plot_results(directory) -> list[Path]:
         s = series[series["cell_id"] == cell.cell_id]
         label = cell.scenario.area
         methods = [m for m in sweep.spec.methods if m in set(s["method"])]
+        style = method_styles(methods)
         first = s[s["method"] == methods[0]]
         t = first["t"].to_numpy()
         for comp, name in (("e", "east"), ("n", "north")):
@@ -65,8 +77,8 @@ def plot_results(directory) -> list[Path]:
             ax1.plot(t, first[f"truth_{comp}"], "k-", lw=1.5, label="truth")
             for m in methods:
                 sm = s[s["method"] == m]
-                ax1.plot(sm["t"], sm[f"est_{comp}"], STYLES[m], color=COLORS[m], label=m)
-                ax2.plot(sm["t"], sm[f"{name}_error_m_mean"], STYLES[m], color=COLORS[m], label=m)
+                ax1.plot(sm["t"], sm[f"est_{comp}"], style[m][0], color=style[m][1], label=m)
+                ax2.plot(sm["t"], sm[f"{name}_error_m_mean"], style[m][0], color=style[m][1], label=m)
             ax1.set_ylabel(f"relative {name} (m)")
             ax2.set_ylabel(f"{name} error (m)")
             ax2.set_xlabel("time (s)")
@@ -79,10 +91,10 @@ def plot_results(directory) -> list[Path]:
         ax1.plot(first["truth_e"], first["truth_n"], "k-", lw=1.5, label="truth")
         for m in methods:
             sm = s[s["method"] == m]
-            ax1.plot(sm["est_e"], sm["est_n"], STYLES[m], color=COLORS[m], label=m)
-            ax2.plot(sm["t"], sm["horizontal_error_m_mean"], STYLES[m], color=COLORS[m], label=m)
+            ax1.plot(sm["est_e"], sm["est_n"], style[m][0], color=style[m][1], label=m)
+            ax2.plot(sm["t"], sm["horizontal_error_m_mean"], style[m][0], color=style[m][1], label=m)
             ax2.fill_between(sm["t"], sm["horizontal_error_m_p05"], sm["horizontal_error_m_p95"],
-                             color=COLORS[m], alpha=0.12)
+                             color=style[m][1], alpha=0.12)
         ax1.set_xlabel("east (m)")
         ax1.set_ylabel("north (m)")
         ax1.legend(fontsize=8)
@@ -98,8 +110,8 @@ def plot_results(directory) -> list[Path]:
         for m in methods:
             sm = s[s["method"] == m]
             est = truth_heading[: len(sm)] + sm["heading_error_deg_mean"].to_numpy()
-            ax1.plot(sm["t"], est, STYLES[m], color=COLORS[m], label=m)
-            ax2.plot(sm["t"], sm["heading_error_deg_abs_mean"], STYLES[m], color=COLORS[m], label=m)
+            ax1.plot(sm["t"], est, style[m][0], color=style[m][1], label=m)
+            ax2.plot(sm["t"], sm["heading_error_deg_abs_mean"], style[m][0], color=style[m][1], label=m)
         ax1.set_ylabel("heading (deg)")
         ax2.set_ylabel("|heading error| (deg)")
         ax2.set_xlabel("time (s)")

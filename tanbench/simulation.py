@@ -2,8 +2,9 @@
 
 Everything here depends only on the scenario's *world* (terrain, trajectory, sensors,
 initial navigation errors; see ``Scenario.world_spec``) and on the run's seed, never on
-the filter: the three methods of a run, and cells that differ only in filter settings,
-take the same :class:`VehicleData` (common random numbers). Each sensor draws from its
+the filter: every method of a run, and cells that differ only in filter settings, take
+the same :class:`VehicleData` (common random numbers). It is split in two: the
+:class:`Observations` a method is given, and the truth that only scoring reads. Each sensor draws from its
 own named stream of the run's ``SeedSequence``, so adding a sensor never shifts another's
 random numbers. The truth and the noise-free sonar ranges are deterministic per world
 and cached per process.
@@ -44,15 +45,19 @@ class NavSolution:
 
 
 @dataclass
-class VehicleData:
-    """Everything the filters may use (sensors, navigation) plus the truth to score them."""
+class Observations:
+    """What the vehicle itself observes: its sensors' outputs and its navigation solution.
 
-    truth: Truth
+    This is all a method is given (with the scenario and the navigation map); the truth
+    stays in :class:`VehicleData` for scoring.
+    """
+
+    t: np.ndarray  # time of every IMU sample, s
+    dt: float  # IMU sampling interval, s
+    latitude_rad: float
     gyro: np.ndarray
     accel: np.ndarray
-    imu_errors: ImuErrors
     dvl_velocity: np.ndarray
-    dvl_scale_error: float
     depth: np.ndarray
     ping_idx: np.ndarray  # IMU sample index of each sonar ping
     dvl_beams: np.ndarray  # (4, 3) body-frame unit vectors
@@ -60,6 +65,16 @@ class VehicleData:
     dvl_ranges: np.ndarray  # (pings, 4) measured ranges, NaN = no bottom
     sbe_ranges: np.ndarray  # (pings, 1)
     nav: NavSolution
+
+
+@dataclass
+class VehicleData:
+    """One run: what the vehicle observes (``obs``) and the truth that only scoring reads."""
+
+    obs: Observations
+    truth: Truth
+    imu_errors: ImuErrors
+    dvl_scale_error: float
     initial_position_error: np.ndarray  # (2,) nav - truth at t=0, m
     initial_heading_error_deg: float
 
@@ -121,12 +136,13 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
     pos, pitch, roll, yaw = run_strapdown(
         truth.dt, gyro, nav_accel, dvl_velocity, depth, truth.pos[0, :2] + pos_err,
         truth.yaw[0] + yaw_err, truth.latitude_rad, nav_cfg.level_window_s, nav_cfg.level_compensation)
-    return VehicleData(
-        truth=truth, gyro=gyro, accel=accel, imu_errors=imu_errors, dvl_velocity=dvl_velocity,
-        dvl_scale_error=scale, depth=depth, ping_idx=ping_idx,
+    obs = Observations(
+        t=truth.t, dt=truth.dt, latitude_rad=truth.latitude_rad, gyro=gyro, accel=accel,
+        dvl_velocity=dvl_velocity, depth=depth, ping_idx=ping_idx,
         dvl_beams=dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg), sbe_beams=altimeter_beam_vectors(),
-        dvl_ranges=dvl_ranges, sbe_ranges=sbe_ranges, nav=NavSolution(pos, pitch, roll, yaw),
-        initial_position_error=pos_err, initial_heading_error_deg=nav_cfg.initial_heading_error_deg)
+        dvl_ranges=dvl_ranges, sbe_ranges=sbe_ranges, nav=NavSolution(pos, pitch, roll, yaw))
+    return VehicleData(obs=obs, truth=truth, imu_errors=imu_errors, dvl_scale_error=scale,
+                       initial_position_error=pos_err, initial_heading_error_deg=nav_cfg.initial_heading_error_deg)
 
 
 @lru_cache(maxsize=4)
@@ -188,21 +204,22 @@ def vehicle_frame(vehicle: VehicleData, every: int = 1):
 
     from tanbench.vehicle.attitude import yaw_to_heading_deg
 
-    tr, nav = vehicle.truth, vehicle.nav
+    tr, obs = vehicle.truth, vehicle.obs
+    nav = obs.nav
     n = tr.t.size
-    dvl = np.full((n, vehicle.dvl_ranges.shape[1]), np.nan)
-    dvl[vehicle.ping_idx] = vehicle.dvl_ranges
+    dvl = np.full((n, obs.dvl_ranges.shape[1]), np.nan)
+    dvl[obs.ping_idx] = obs.dvl_ranges
     sbe = np.full(n, np.nan)
-    sbe[vehicle.ping_idx] = vehicle.sbe_ranges[:, 0]
+    sbe[obs.ping_idx] = obs.sbe_ranges[:, 0]
     cols = {
         "t": tr.t,
         "truth_e": tr.pos[:, 0], "truth_n": tr.pos[:, 1], "truth_u": tr.pos[:, 2],
         "truth_pitch_deg": np.degrees(tr.pitch), "truth_roll_deg": np.degrees(tr.roll),
         "truth_heading_deg": yaw_to_heading_deg(tr.yaw),
-        "gyro_x": vehicle.gyro[:, 0], "gyro_y": vehicle.gyro[:, 1], "gyro_z": vehicle.gyro[:, 2],
-        "accel_x": vehicle.accel[:, 0], "accel_y": vehicle.accel[:, 1], "accel_z": vehicle.accel[:, 2],
-        "dvl_vx": vehicle.dvl_velocity[:, 0], "dvl_vy": vehicle.dvl_velocity[:, 1],
-        "dvl_vz": vehicle.dvl_velocity[:, 2], "pressure_depth": vehicle.depth,
+        "gyro_x": obs.gyro[:, 0], "gyro_y": obs.gyro[:, 1], "gyro_z": obs.gyro[:, 2],
+        "accel_x": obs.accel[:, 0], "accel_y": obs.accel[:, 1], "accel_z": obs.accel[:, 2],
+        "dvl_vx": obs.dvl_velocity[:, 0], "dvl_vy": obs.dvl_velocity[:, 1],
+        "dvl_vz": obs.dvl_velocity[:, 2], "pressure_depth": obs.depth,
         "nav_e": nav.pos[:, 0], "nav_n": nav.pos[:, 1], "nav_u": nav.pos[:, 2],
         "nav_pitch_deg": np.degrees(nav.pitch), "nav_roll_deg": np.degrees(nav.roll),
         "nav_heading_deg": yaw_to_heading_deg(nav.yaw),

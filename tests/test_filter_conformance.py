@@ -19,15 +19,19 @@ import numpy as np
 import pytest
 
 from filters_support import assert_same_tree, series_keys, short_scenario, snapshot
+from tanbench.options import REGULARISATION, RESAMPLING
 from tanbench.errors import TanbenchError
-from tanbench.filters import METHODS
+from tanbench.methods.registry import builtin_names
 from tanbench.filters import resample as rs
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.run import METRIC_COLUMNS, run_method
+from tanbench.methods import run_method
+from tanbench.schema import METRIC_COLUMNS
 from tanbench.filters.state import N_TIGHT, YAW
 from tanbench.filters.tight import REGULARISED_STATES
 from tanbench.simulation import simulate_vehicle
 from tanbench.terrain.grid import Map
+
+METHODS = builtin_names()
 
 SEED = 90210
 PERFECT_SENSORS = dict(gyro_turn_on_bias_deg_h=0.0, gyro_bias_instability_deg_h=0.0, gyro_arw_deg_sqrt_h=0.0,
@@ -55,7 +59,7 @@ def plane_world(monkeypatch):
 
     The simulation's world cache is cleared before and after, so no other test sees the plane.
     """
-    import tanbench.filters.run as run_mod
+    import tanbench.terrain as run_mod
     import tanbench.simulation as sim_mod
     from tanbench.terrain import navigation_map, truth_map
 
@@ -189,8 +193,8 @@ def test_common_random_numbers(base, base_results):
     assert_same_tree(before, v)
     # different vehicle seeds are different runs
     v2 = simulate_vehicle(sc, vseed(1))
-    assert not np.array_equal(v.nav.pos, v2.nav.pos)
-    assert not np.array_equal(v.dvl_ranges, v2.dvl_ranges)
+    assert not np.array_equal(v.obs.nav.pos, v2.obs.nav.pos)
+    assert not np.array_equal(v.obs.dvl_ranges, v2.obs.dvl_ranges)
 
 
 # --------------------------------------------------------------------------------------
@@ -207,7 +211,7 @@ def test_distance_innovation_modes_run(base, method, mode):
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("scheme", sorted(rs.SCHEMES))
+@pytest.mark.parametrize("scheme", sorted(RESAMPLING))
 def test_resampling_schemes_run(base, method, scheme):
     _, v = base  # same world: only filter settings differ
     sc = short_scenario(filter=dict(resampling=scheme, ess_threshold=1.0))  # resample at every update
@@ -217,7 +221,7 @@ def test_resampling_schemes_run(base, method, scheme):
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("reg", sorted(rs.REGULARISATIONS))
+@pytest.mark.parametrize("reg", sorted(REGULARISATION))
 @pytest.mark.parametrize("states", sorted(REGULARISED_STATES))
 def test_regularisations_run(base, method, reg, states):
     _, v = base
@@ -261,7 +265,7 @@ def test_zero_range_noise_no_worse(method):
             errs[sc.noise_m].append(r.metrics["final_horizontal_error_m"])
     v0 = simulate_vehicle(clean, vseed(0))
     v1 = simulate_vehicle(noisy, vseed(0))
-    assert not np.array_equal(v0.dvl_ranges, v1.dvl_ranges)
+    assert not np.array_equal(v0.obs.dvl_ranges, v1.obs.dvl_ranges)
     assert np.mean(errs[0.0]) <= 1.25 * np.mean(errs[1.0]) + 1.0, errs
 
 
@@ -273,8 +277,8 @@ def test_flat_seafloor_leaves_position_unobservable(plane_world, method):
     sc = short_scenario(particles=500)
     for k in range(2):
         v = simulate_vehicle(sc, vseed(k))
-        altitude = v.truth.pos[v.ping_idx, 2] - plane_world
-        np.testing.assert_allclose(v.sbe_ranges[:, 0], altitude, rtol=0.05, atol=sc.noise_m)  # really a plane
+        altitude = v.truth.pos[v.obs.ping_idx, 2] - plane_world
+        np.testing.assert_allclose(v.obs.sbe_ranges[:, 0], altitude, rtol=0.05, atol=sc.noise_m)  # really a plane
         r = run_method(sc, method, v, fseed(k, method))
         check_finite(r, method)
         s = r.series
@@ -302,7 +306,7 @@ def test_no_bottom_lock_is_not_divergence(method):
     away and re-spreads it over the initial 150 m square)."""
     sc = short_scenario(sensors=dict(max_range_m=45.0))
     v = simulate_vehicle(sc, vseed(0))
-    sensor = v.sbe_ranges if method == "tight-sbe" else v.dvl_ranges
+    sensor = v.obs.sbe_ranges if method == "tight-sbe" else v.obs.dvl_ranges
     no_lock = np.isnan(sensor).all(axis=1)
     steps = sc.filter.divergence_steps
     assert no_lock.sum() > 3 * steps  # the scenario does what it says
@@ -323,7 +327,7 @@ def test_tiny_clouds(method, particles):
     assert (r.series["ess"] <= particles + 1e-9).all()
 
 
-@pytest.mark.parametrize("scheme", sorted(rs.SCHEMES))
+@pytest.mark.parametrize("scheme", sorted(RESAMPLING))
 def test_all_weight_on_one_particle(scheme):
     """The loop's weight pipeline on a one-hot posterior: log-weights [0, -inf, ...] normalise without
     NaN, ESS is 1, every scheme resamples only that particle, the estimate is that particle with
@@ -338,7 +342,7 @@ def test_all_weight_on_one_particle(scheme):
     assert not np.isnan(w).any() and w[42] == 1.0
     assert rs.effective_sample_size(w) == 1.0
     idx = np.empty(m, dtype=np.int64)
-    rs.resample_indices(rs.SCHEMES[scheme], w, rng.random(m), idx)
+    rs.resample_indices(RESAMPLING[scheme], w, rng.random(m), idx)
     assert (idx == 42).all()
     target = x[42].copy()
     rs.apply_resample(x, idx, np.empty_like(x))
@@ -346,7 +350,7 @@ def test_all_weight_on_one_particle(scheme):
     weighted_estimate(x, np.full(m, 1.0 / m), YAW, target[YAW], mean, var, cov)
     np.testing.assert_allclose(mean, target, atol=1e-9)
     assert (np.abs(var) < 1e-18).all()
-    for kind in rs.REGULARISATIONS.values():
+    for kind in REGULARISATION.values():
         y = x.copy()
         rs.regularise(y, np.random.default_rng(1), kind, REGULARISED_STATES["position-heading-biases"], 0.2, N_TIGHT)
         assert np.isfinite(y).all()

@@ -20,6 +20,7 @@ import pytest
 from scipy.special import logsumexp
 
 from filters_support import KERNEL_SEED, VEHICLE_SEED
+from tanbench.options import REGULARISATION, RESAMPLING
 from tanbench.config import Scenario
 from tanbench.filters import estimate as est_mod
 from tanbench.filters import likelihood as lik
@@ -46,7 +47,7 @@ def assert_loglik_matches(out, best, ref, best_ref):
         assert best == pytest.approx(best_ref, rel=1e-9)
 
 
-SCHEME_IDS = sorted(rs.SCHEMES, key=rs.SCHEMES.get)
+SCHEME_IDS = sorted(RESAMPLING, key=RESAMPLING.get)
 
 
 # --------------------------------------------------------------------------------------
@@ -64,9 +65,9 @@ def world():
 def increments(request, world):
     """(update sample indices, increments table) at a sampling time of 1 s or 10 s."""
     _, v, _ = world
-    upd = v.ping_idx[:: request.param]
-    nav = v.nav
-    return upd, compute_increments(v.truth.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    upd = v.obs.ping_idx[:: request.param]
+    nav = v.obs.nav
+    return upd, compute_increments(v.obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
 
 
 def interesting_rows(inc: np.ndarray, rng) -> list[int]:
@@ -107,7 +108,7 @@ def test_propagate_tight_matches_numpy(world, increments, dist_mode):
     m = 257
     for row in interesting_rows(inc, rng):
         k0 = upd[row]
-        nav = v.nav
+        nav = v.obs.nav
         x0 = tight_cloud(rng, m, nav.pos[k0, :2], nav.pos[k0, 2], nav.pitch[k0], nav.roll[k0], nav.yaw[k0])
         noise = rng.standard_normal((m, 6))
         sig_pos = prop.position_noise(0.1 * 10, 0.1, dist_mode)
@@ -130,10 +131,10 @@ def test_propagate_tight_geometry(world, increments):
     k0 = upd[row]
     deltas = np.array([0.0, math.pi / 2, -math.pi / 2, math.pi, 0.3, 2 * math.pi + 0.3])
     x = np.zeros((deltas.size, N_TIGHT))
-    x[:, YAW] = v.nav.yaw[k0] + deltas
+    x[:, YAW] = v.obs.nav.yaw[k0] + deltas
     x[:, E], x[:, N] = 100.0, 200.0
     innov = np.empty((deltas.size, 2))
-    prop.propagate_tight(x, inc[row], v.nav.yaw[k0], np.zeros((deltas.size, 6)), 1.0, 1.0, 1.0,
+    prop.propagate_tight(x, inc[row], v.obs.nav.yaw[k0], np.zeros((deltas.size, 6)), 1.0, 1.0, 1.0,
                          prop.DIST_NAVIGATION, innov)
     d0 = inc[row, [incmod.D0E, incmod.D0N]]
     c, s = np.cos(deltas), np.sin(deltas)
@@ -141,7 +142,7 @@ def test_propagate_tight_geometry(world, increments):
     np.testing.assert_allclose(x[:, [E, N]] - [100.0, 200.0], expect, atol=1e-9)
     np.testing.assert_allclose(x[0, [E, N]] - [100.0, 200.0], d0, atol=1e-12)  # delta = 0: the nav move
     np.testing.assert_allclose(x[1, [E, N]] - [100.0, 200.0], [-d0[1], d0[0]], atol=1e-9)  # +90 deg: west of it
-    np.testing.assert_allclose(x[:, YAW], v.nav.yaw[k0] + deltas + inc[row, incmod.DYAW], atol=1e-12)
+    np.testing.assert_allclose(x[:, YAW], v.obs.nav.yaw[k0] + deltas + inc[row, incmod.DYAW], atol=1e-12)
     np.testing.assert_allclose(x[:, U], inc[row, incmod.DUP], atol=1e-12)
     np.testing.assert_allclose(innov[0], 0.0, atol=1e-12)  # the nav heading: no distance innovation
 
@@ -159,10 +160,10 @@ def test_propagate_loose_matches_numpy(world, increments):
     _, v, _ = world
     upd, _ = increments
     rng = np.random.default_rng([KERNEL_SEED, 11])
-    d0 = np.diff(v.nav.pos[upd, :2], axis=0)
+    d0 = np.diff(v.obs.nav.pos[upd, :2], axis=0)
     m = 301
     for row in rng.integers(0, d0.shape[0], 6):
-        x0 = v.nav.pos[upd[row], :2] + rng.uniform(-100, 100, (m, 2))
+        x0 = v.obs.nav.pos[upd[row], :2] + rng.uniform(-100, 100, (m, 2))
         noise = rng.standard_normal((m, 3))
         x = x0.copy()
         prop.propagate_loose(x, d0[row, 0], d0[row, 1], noise, 1.0, math.radians(30))
@@ -196,8 +197,8 @@ def likelihood_particles(rng, nmap, m=240):
 
 def nav_attitude(v, ping):
     """The navigation system's (pitch, roll, yaw) at a ping: the reference the tight kernel expands about."""
-    k = v.ping_idx[ping]
-    return float(v.nav.pitch[k]), float(v.nav.roll[k]), float(v.nav.yaw[k])
+    k = v.obs.ping_idx[ping]
+    return float(v.obs.nav.pitch[k]), float(v.obs.nav.roll[k]), float(v.obs.nav.yaw[k])
 
 
 RANGE_CASES = {
@@ -216,8 +217,8 @@ def test_loglik_tight_matches_numpy(world, sensor, nan_beams, reference):
     _, v, nmap = world
     attitude = (lambda ping: nav_attitude(v, ping)) if reference == "nav" else (lambda ping: (0.0, 0.0, 0.0))
     rng = np.random.default_rng([KERNEL_SEED, 21, len(RANGE_CASES[nan_beams])])
-    beams = v.dvl_beams if sensor == "dvl" else v.sbe_beams
-    measured = v.dvl_ranges if sensor == "dvl" else v.sbe_ranges
+    beams = v.obs.dvl_beams if sensor == "dvl" else v.obs.sbe_beams
+    measured = v.obs.dvl_ranges if sensor == "dvl" else v.obs.sbe_ranges
     drop = [i for i in RANGE_CASES[nan_beams] if i < beams.shape[0]]
     cloud, _ = likelihood_particles(rng, nmap)
     za = nmap.kernel_args()
@@ -241,11 +242,11 @@ def test_loglik_tight_outside_penalty_and_best(world):
     rng = np.random.default_rng([KERNEL_SEED, 22])
     x, off = likelihood_particles(rng, nmap)
     za = nmap.kernel_args()
-    ranges = v.dvl_ranges[100].copy()
+    ranges = v.obs.dvl_ranges[100].copy()
     dist = rng.normal(0, 0.3, (x.shape[0], 2))
     out = np.empty(x.shape[0])
     sig_u, outside, sig_d = 1.5, 5.0, 0.1
-    best = lik.loglik_tight(x, v.dvl_beams, ranges, *za, sig_u, outside, dist, sig_d, *nav_attitude(v, 100), out)
+    best = lik.loglik_tight(x, v.obs.dvl_beams, ranges, *za, sig_u, outside, dist, sig_d, *nav_attitude(v, 100), out)
     dist_term = (dist ** 2).sum(axis=1) / sig_d ** 2
     np.testing.assert_allclose(out[off], -0.5 * (4 * outside ** 2 + dist_term[off]), rtol=1e-12)
     chi = -2.0 * out - dist_term
@@ -263,7 +264,7 @@ def test_loglik_tight_nan_range_is_no_beam(world, drop):
     rng = np.random.default_rng([KERNEL_SEED, 23, *drop])
     x, _ = likelihood_particles(rng, nmap)
     za = nmap.kernel_args()
-    ranges = v.dvl_ranges[200].copy()
+    ranges = v.obs.dvl_ranges[200].copy()
     keep = [i for i in range(4) if i not in drop]
     dist = rng.normal(0, 0.3, (x.shape[0], 2))
     with_nan = ranges.copy()
@@ -271,8 +272,8 @@ def test_loglik_tight_nan_range_is_no_beam(world, drop):
     out_nan = np.empty(x.shape[0])
     out_sub = np.empty(x.shape[0])
     att = nav_attitude(v, 200)
-    best_nan = lik.loglik_tight(x, v.dvl_beams, with_nan, *za, 1.0, 5.0, dist, 0.1, *att, out_nan)
-    best_sub = lik.loglik_tight(x, np.ascontiguousarray(v.dvl_beams[keep]), np.ascontiguousarray(ranges[keep]),
+    best_nan = lik.loglik_tight(x, v.obs.dvl_beams, with_nan, *za, 1.0, 5.0, dist, 0.1, *att, out_nan)
+    best_sub = lik.loglik_tight(x, np.ascontiguousarray(v.obs.dvl_beams[keep]), np.ascontiguousarray(ranges[keep]),
                                 *za, 1.0, 5.0, dist, 0.1, *att, out_sub)
     np.testing.assert_allclose(out_nan, out_sub, rtol=1e-12, atol=1e-12)
     assert best_nan == pytest.approx(best_sub, rel=1e-12)
@@ -285,7 +286,7 @@ def test_loglik_tight_no_ranges_at_all(world):
     x, _ = likelihood_particles(rng, nmap)
     dist = rng.normal(0, 0.3, (x.shape[0], 2))
     out = np.empty(x.shape[0])
-    best = lik.loglik_tight(x, v.sbe_beams, np.array([np.nan]), *nmap.kernel_args(), 1.0, 5.0, dist, 0.1,
+    best = lik.loglik_tight(x, v.obs.sbe_beams, np.array([np.nan]), *nmap.kernel_args(), 1.0, 5.0, dist, 0.1,
                             *nav_attitude(v, 0), out)
     np.testing.assert_allclose(out, -0.5 * (dist ** 2).sum(axis=1) / 0.01, rtol=1e-12)
     assert best == np.inf
@@ -293,11 +294,11 @@ def test_loglik_tight_no_ranges_at_all(world):
 
 def loose_offsets(v, ping, drop=()):
     """Beam offsets (m, 3) of one ping, projected with the navigation attitude."""
-    k = v.ping_idx[ping]
-    c = dcm_body_to_nav_numpy(v.nav.pitch[k], v.nav.roll[k], v.nav.yaw[k])
-    off = (v.dvl_beams @ c.T) * v.dvl_ranges[ping][:, None]
+    k = v.obs.ping_idx[ping]
+    c = dcm_body_to_nav_numpy(v.obs.nav.pitch[k], v.obs.nav.roll[k], v.obs.nav.yaw[k])
+    off = (v.obs.dvl_beams @ c.T) * v.obs.dvl_ranges[ping][:, None]
     off[list(drop)] = np.nan
-    return np.ascontiguousarray(off), v.nav.pos[k, 2]
+    return np.ascontiguousarray(off), v.obs.nav.pos[k, 2]
 
 
 @pytest.mark.parametrize("nan_beams", list(RANGE_CASES), ids=list(RANGE_CASES))
@@ -307,7 +308,7 @@ def test_loglik_loose_matches_numpy(world, nan_beams):
     x8, _ = likelihood_particles(rng, nmap)
     x = np.ascontiguousarray(x8[:, :2])
     za = nmap.kernel_args()
-    for ping in rng.integers(0, v.dvl_ranges.shape[0], 3):
+    for ping in rng.integers(0, v.obs.dvl_ranges.shape[0], 3):
         off, up = loose_offsets(v, ping, RANGE_CASES[nan_beams])
         out = np.empty(x.shape[0])
         best = lik.loglik_loose(x, off, up, *za, 1.0, 5.0, out)
@@ -411,7 +412,7 @@ def weight_cases(rng, m):
 
 @pytest.mark.parametrize("scheme", SCHEME_IDS)
 def test_resample_indices_match_numpy(scheme):
-    code = rs.SCHEMES[scheme]
+    code = RESAMPLING[scheme]
     rng = np.random.default_rng([KERNEL_SEED, 51, code])
     for m in (1, 2, 7, 1000, 4099):
         for w in weight_cases(rng, m):
@@ -427,7 +428,7 @@ def test_resample_indices_match_numpy(scheme):
 
 @pytest.mark.parametrize("scheme", SCHEME_IDS)
 def test_resample_all_weight_on_one(scheme):
-    code = rs.SCHEMES[scheme]
+    code = RESAMPLING[scheme]
     rng = np.random.default_rng([KERNEL_SEED, 52, code])
     m = 500
     for j in (0, 1, 250, m - 1):
@@ -470,7 +471,7 @@ def test_resample_counts_unbiased(scheme):
     The z-scores use the multinomial variance M w (1 - w), an upper bound for the other
     schemes; a scheme with a bias of even 0.1 copy per particle fails.
     """
-    code = rs.SCHEMES[scheme]
+    code = RESAMPLING[scheme]
     rng = np.random.default_rng([KERNEL_SEED, 54, code])
     m, reps = 20, 4000
     w = rng.dirichlet(np.full(m, 0.7))
@@ -571,11 +572,11 @@ def test_shrink_jitter_collapsed_cloud_stays_finite():
     np.testing.assert_allclose(x, x0, rtol=1e-14, atol=1e-14)
 
 
-@pytest.mark.parametrize("kind", sorted(rs.REGULARISATIONS))
+@pytest.mark.parametrize("kind", sorted(REGULARISATION))
 def test_regularise_draws_like_numpy(kind):
     """``regularise`` draws its noise row by row from the Generator it is given: the same as
     ``standard_normal((M, ncols))`` from an identically seeded numpy Generator."""
-    code = rs.REGULARISATIONS[kind]
+    code = REGULARISATION[kind]
     rng = np.random.default_rng([KERNEL_SEED, 64])
     x0 = cloud_for_jitter(rng, 300)
     x = x0.copy()
@@ -605,12 +606,12 @@ def test_weighted_estimate_matches_numpy(world):
     rng = np.random.default_rng([KERNEL_SEED, 71])
     _, v, _ = world
     for _ in range(5):
-        k = rng.integers(0, v.nav.yaw.size)
-        x = tight_cloud(rng, 500, v.nav.pos[k, :2], v.nav.pos[k, 2], v.nav.pitch[k], v.nav.roll[k], v.nav.yaw[k])
+        k = rng.integers(0, v.obs.nav.yaw.size)
+        x = tight_cloud(rng, 500, v.obs.nav.pos[k, :2], v.obs.nav.pos[k, 2], v.obs.nav.pitch[k], v.obs.nav.roll[k], v.obs.nav.yaw[k])
         w = rng.random(500) ** 3
         w /= w.sum()
-        got = run_estimate(x, w, YAW, v.nav.yaw[k])
-        ref = est_mod.weighted_estimate_numpy(x, w, YAW, v.nav.yaw[k])
+        got = run_estimate(x, w, YAW, v.obs.nav.yaw[k])
+        ref = est_mod.weighted_estimate_numpy(x, w, YAW, v.obs.nav.yaw[k])
         for a, b in zip(got, ref):
             np.testing.assert_allclose(a, b, **TOL)
         # the east/north covariance is the ordinary weighted covariance

@@ -18,9 +18,11 @@ from scipy.stats import wilcoxon
 
 from filters_support import filter_seed, vehicle_seed
 from tanbench.config import Scenario
-from tanbench.filters import METHODS
-from tanbench.filters.run import run_method
+from tanbench.methods.registry import builtin_names
+from tanbench.methods import run_method
 from tanbench.simulation import simulate_vehicle
+
+METHODS = builtin_names()
 
 pytestmark = pytest.mark.slow
 

@@ -41,14 +41,14 @@ def test_monterey_sweep_validates_and_has_real_relief(at_root):
 
 def test_monterey_one_short_run_per_method(at_root):
     """One shortened run of each method over the canyon finishes with finite errors."""
-    from tanbench.filters import METHODS
-    from tanbench.filters.run import run_method
+    from tanbench.methods.registry import builtin_names
+    from tanbench.methods import run_method
     from tanbench.simulation import simulate_vehicle
 
     sc = load_sweep(ROOT / "configs" / "monterey.yaml").cells[0].scenario.model_copy(
         update={"duration_s": 120.0, "particles": 500})
     vehicle = simulate_vehicle(sc, np.random.SeedSequence(3))
-    assert np.isfinite(vehicle.dvl_ranges).mean() > 0.9
-    for method in METHODS:
+    assert np.isfinite(vehicle.obs.dvl_ranges).mean() > 0.9
+    for method in builtin_names():
         m = run_method(sc, method, vehicle, np.random.SeedSequence(4)).metrics
         assert np.isfinite(m["final_horizontal_error_m"])

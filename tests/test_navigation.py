@@ -74,8 +74,8 @@ def test_strapdown_jit_matches_numpy_reference(paper_run, compensate):
     """Jitted strapdown equals strapdown_numpy to 1e-9 on 40 s of a noisy run (dive end and a turn)."""
     k0, k1 = 16_000, 20_000  # 160-200 s: the pitch ramp ends at 175 s, the first turn starts there
     r = paper_run
-    args = (r.truth.dt, r.gyro[k0:k1], r.accel[k0:k1], r.dvl_velocity[k0:k1], r.depth[k0:k1],
-            r.nav.pos[k0, :2], r.nav.yaw[k0], r.truth.latitude_rad, 1.0, compensate)
+    args = (r.truth.dt, r.obs.gyro[k0:k1], r.obs.accel[k0:k1], r.obs.dvl_velocity[k0:k1], r.obs.depth[k0:k1],
+            r.obs.nav.pos[k0, :2], r.obs.nav.yaw[k0], r.truth.latitude_rad, 1.0, compensate)
     jit = run_strapdown(*args)
     ref = strapdown_numpy(*args)
     for name, a, b in zip(("pos", "pitch", "roll", "yaw"), jit, ref):
@@ -88,18 +88,18 @@ def test_free_running_ins_drifts_hundreds_of_metres(paper_run, scenario, facts):
     r = paper_run
     assert scenario.sensors.grade == "table1"
     assert scenario.navigation.initial_heading_error_deg == facts["sensors"]["initial_heading_error_deg"]
-    heading_err0 = -math.degrees(r.nav.yaw[0] - r.truth.yaw[0])  # heading is -yaw
+    heading_err0 = -math.degrees(r.obs.nav.yaw[0] - r.truth.yaw[0])  # heading is -yaw
     assert heading_err0 == pytest.approx(facts["sensors"]["initial_heading_error_deg"], abs=1e-9)
     half = facts["trajectory"]["initial_horizontal_error_area_m"][0] / 2
-    np.testing.assert_allclose(r.nav.pos[0, :2] - r.truth.pos[0, :2], r.initial_position_error, atol=1e-9)
+    np.testing.assert_allclose(r.obs.nav.pos[0, :2] - r.truth.pos[0, :2], r.initial_position_error, atol=1e-9)
     assert np.all(np.abs(r.initial_position_error) <= half)
-    err = np.linalg.norm(r.nav.pos[:, :2] - r.truth.pos[:, :2], axis=1)
+    err = np.linalg.norm(r.obs.nav.pos[:, :2] - r.truth.pos[:, :2], axis=1)
     assert r.truth.t[-1] == pytest.approx(facts["trajectory"]["total_s"])
     assert err[-1] > 100.0
     assert err.max() > 200.0
-    np.testing.assert_allclose(r.nav.pos[:, 2], -r.depth, atol=0)  # up is the pressure depth
+    np.testing.assert_allclose(r.obs.nav.pos[:, 2], -r.obs.depth, atol=0)  # up is the pressure depth
     # heading error stays near the initial 30 deg (gyro drift adds at most ~(30 + 3 x 25) deg/h)
-    drift = np.degrees(np.abs(wrap_pi(r.nav.yaw - r.truth.yaw) - (r.nav.yaw[0] - r.truth.yaw[0])))
+    drift = np.degrees(np.abs(wrap_pi(r.obs.nav.yaw - r.truth.yaw) - (r.obs.nav.yaw[0] - r.truth.yaw[0])))
     assert drift.max() < 105.0 * r.truth.t[-1] / 3600.0
 
 
@@ -107,7 +107,7 @@ def test_free_running_ins_drifts_hundreds_of_metres(paper_run, scenario, facts):
 
 def test_increments_jit_matches_numpy_reference(paper_run, synthetic_nav):
     """compute_increments equals increments_numpy to 1e-9 (1 s, 5 s and irregular intervals)."""
-    nav = paper_run.nav
+    nav = paper_run.obs.nav
     dt = paper_run.truth.dt
     n = nav.yaw.size
     cases = [(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, np.arange(0, n, 100)),
@@ -166,11 +166,11 @@ def _check_first_order(dt, pos, pitch, roll, yaw, vel, k0, k1):
 @pytest.mark.parametrize("t0", [170.0, 180.0, 200.0])
 def test_increments_first_order_matches_brute_force_in_a_turn(paper_run, t0):
     """On the noisy run's navigation solution, 10 s intervals in the first turn: formula vs 100 Hz < 1 mm."""
-    r, nav = paper_run, paper_run.nav
+    r, nav = paper_run, paper_run.obs.nav
     k0 = int(round(t0 / r.truth.dt))
     k1 = k0 + int(round(10.0 / r.truth.dt))
     assert np.ptp(r.truth.yaw[k0:k1 + 1]) > 0.1  # a turn happens inside the interval
-    _check_first_order(r.truth.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, r.dvl_velocity, k0, k1)
+    _check_first_order(r.truth.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, r.obs.dvl_velocity, k0, k1)
 
 
 def test_increments_first_order_matches_brute_force_with_roll(synthetic_nav):

@@ -236,7 +236,7 @@ def test_runs_option_overrides_the_file(base, tmp_path):
 # A failure injected into the worker processes: ``sitecustomize`` is imported at start-up
 # by every Python process that has its directory on PYTHONPATH, the spawned workers too.
 FAULT = '''
-import tanbench.filters.run as _run
+import tanbench.methods as _run
 
 _real = _run.run_method
 
@@ -282,7 +282,7 @@ def test_failed_run_is_recorded_and_the_rest_finish(tmp_path):
 
 def test_execute_turns_exceptions_into_error_rows(monkeypatch):
     """`tasks.execute` never raises: a failing method gives an error row, the other methods still run."""
-    import tanbench.filters.run as run_module
+    import tanbench.methods as run_module
     from tanbench.runner.tasks import Task, execute
 
     sweep = load_sweep_text(sweep_dict(tables={}))

@@ -96,13 +96,13 @@ def test_track_uncertainty_and_footprints_inside_map(area, facts):
     s = Scenario(area=area, noise_m=0.0)  # noise-free ranges: exact footprints
     np.testing.assert_allclose(s.trajectory.start_enu_m, facts["areas"][area]["start_enu_m"])
     run = simulate_vehicle(s, np.random.SeedSequence(0))
-    tr, k = run.truth, run.ping_idx
+    tr, k = run.truth, run.obs.ping_idx
     assert tr.t[k][-1] == facts["trajectory"]["total_s"]
     margin = (facts["filter"]["initial_uniform_area_m"][0]
               + facts["trajectory"]["initial_horizontal_error_area_m"][0]) / 2.0
     c_bn = dcm_body_to_nav_numpy(tr.pitch[k], tr.roll[k], tr.yaw[k])
-    beams = np.vstack([run.dvl_beams, run.sbe_beams])
-    ranges = np.hstack([run.dvl_ranges, run.sbe_ranges])
+    beams = np.vstack([run.obs.dvl_beams, run.obs.sbe_beams])
+    ranges = np.hstack([run.obs.dvl_ranges, run.obs.sbe_ranges])
     assert np.isfinite(ranges).all()  # every beam finds the bottom on the whole run
     foot = tr.pos[k][:, None, :] + ranges[..., None] * np.einsum("nij,mj->nmi", c_bn, beams)
     tmap = truth_map(s.terrain)
@@ -128,7 +128,7 @@ def test_vehicle_run_trajectory(facts):
     # the run fits its own synthetic map and every beam finds the bottom
     run = simulate_vehicle(s, np.random.SeedSequence(0))
     assert run.truth.t[-1] == pytest.approx(v["duration_s"])
-    assert np.isfinite(run.dvl_ranges).all() and np.isfinite(run.sbe_ranges).all()
+    assert np.isfinite(run.obs.dvl_ranges).all() and np.isfinite(run.obs.sbe_ranges).all()
 
 
 def test_duration_cut_is_a_prefix_of_the_full_run(paper_run):
@@ -166,10 +166,10 @@ def test_error_free_imu_reproduces_truth(paper_run):
 
 def _random_arrays(run) -> dict:
     return {
-        "gyro": run.gyro, "accel": run.accel, "gyro_bias": run.imu_errors.gyro_bias,
-        "accel_bias": run.imu_errors.accel_bias, "dvl_velocity": run.dvl_velocity,
-        "depth": run.depth, "dvl_ranges": run.dvl_ranges, "sbe_ranges": run.sbe_ranges,
-        "nav_pos": run.nav.pos, "nav_yaw": run.nav.yaw, "nav_pitch": run.nav.pitch,
+        "gyro": run.obs.gyro, "accel": run.obs.accel, "gyro_bias": run.imu_errors.gyro_bias,
+        "accel_bias": run.imu_errors.accel_bias, "dvl_velocity": run.obs.dvl_velocity,
+        "depth": run.obs.depth, "dvl_ranges": run.obs.dvl_ranges, "sbe_ranges": run.obs.sbe_ranges,
+        "nav_pos": run.obs.nav.pos, "nav_yaw": run.obs.nav.yaw, "nav_pitch": run.obs.nav.pitch,
         "initial_position_error": run.initial_position_error,
         "dvl_scale_error": np.array(run.dvl_scale_error),
     }
@@ -205,14 +205,14 @@ def test_simulation_noise_levels_share_random_numbers(paper_run, scenario, run_s
             if key not in ("dvl_ranges", "sbe_ranges"):
                 assert np.array_equal(base[key], other[key]), (nm, key)
     for key in ("dvl_ranges", "sbe_ranges"):
-        r0, r1, r2 = (getattr(runs[nm], key) for nm in (0.0, 1.0, 2.0))
+        r0, r1, r2 = (getattr(runs[nm].obs, key) for nm in (0.0, 1.0, 2.0))
         assert np.isfinite(r0).all()
         unit = r1 - r0
         assert np.abs(unit).max() <= 1.0 + 1e-9 and np.abs(unit).max() > 0.99
         np.testing.assert_allclose(r2 - r0, 2.0 * unit, rtol=0, atol=1e-9)
     # the DVL and altimeter ranges have independent noise
-    assert abs(np.corrcoef((runs[1.0].dvl_ranges - runs[0.0].dvl_ranges)[:, 0],
-                           (runs[1.0].sbe_ranges - runs[0.0].sbe_ranges)[:, 0])[0, 1]) < 0.1
+    assert abs(np.corrcoef((runs[1.0].obs.dvl_ranges - runs[0.0].obs.dvl_ranges)[:, 0],
+                           (runs[1.0].obs.sbe_ranges - runs[0.0].obs.sbe_ranges)[:, 0])[0, 1]) < 0.1
 
 
 def test_track_leaving_the_map_raises():

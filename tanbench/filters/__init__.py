@@ -1,6 +1,8 @@
-"""The three TAN methods: tightly coupled PF with DVL or SBE beams, loosely coupled PF."""
+"""Numerical kernels of the particle filters: propagation, likelihood, resampling, estimates.
 
-METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")
+Jitted functions on plain arrays (each with a plain-numpy reference in the tests); the
+methods that assemble them into TAN filters are in :mod:`tanbench.methods`.
+"""
 
 # fastmath without the no-NaN / no-Inf assumptions: the kernels test for NaN (beams without
 # a range, footprints off the map), which full fastmath would silently compile away.

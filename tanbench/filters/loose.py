@@ -27,7 +27,7 @@ from tanbench.filters.likelihood import loglik_loose
 from tanbench.filters.propagate import propagate_loose
 from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
 
-LOOSE_COLS = np.array([0, 1], dtype=np.int64)
+LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states the regularisation jitters
 
 
 @nb.njit(cache=True)
@@ -39,11 +39,14 @@ def init_loose(x, rng, centre_e, centre_n, half_side):
 
 
 @nb.njit(cache=True)
-def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, z, e0, n0, inv_re, inv_rn,
-                      sig_pos, sig_heading, sig_u, outside_sigma, scheme, ess_thr, reg_kind, reg_size, min_spread,
-                      div_sigma, div_steps,
-                      half_side, converged_std, out_en, var, ess_out, reinit_out, fixed_out):
-    """Run the loose filter; ``out_en`` (K+1, 2) is the fix-corrected navigation position."""
+def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div, half_side,
+                      out_en, var, ess_out, reinit_out, fixed_out):
+    """Run the loose filter; ``out_en`` (K+1, 2) is the fix-corrected navigation position.
+
+    ``zmap``, ``model``, ``rs`` and ``div`` are the bundles of :mod:`tanbench.filters.params`
+    (MapArgs, LooseModel, Resampling, Divergence).
+    """
+    z, e0, n0, inv_re, inv_rn = zmap
     m = x.shape[0]
     steps = offsets.shape[0]
     logw = np.zeros(m)
@@ -60,22 +63,23 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, z, e0, n0, inv_re, in
     fix_n = 0.0
     bad = 0
     good = 0
-    consistent_chi = (0.5 * div_sigma) ** 2
+    consistent_chi = (0.5 * div.sigma) ** 2
     for k in range(steps):
         if k > 0:
             for j in range(m):
                 noise[j, 0] = rng.standard_normal()
                 noise[j, 1] = rng.standard_normal()
                 noise[j, 2] = rng.standard_normal()
-            propagate_loose(x, d0[k - 1, 0], d0[k - 1, 1], noise, sig_pos, sig_heading)
-        best = loglik_loose(x, offsets[k], nav_up[k], z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, ll)
+            propagate_loose(x, d0[k - 1, 0], d0[k - 1, 1], noise, model.sig_pos, model.sig_heading)
+        best = loglik_loose(x, offsets[k], nav_up[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma,
+                            ll)
         for j in range(m):
             logw[j] += ll[j]
         normalize_log_weights(logw, w)
         weighted_estimate(x, w, -1, 0.0, mean, v, cov)
         ess = effective_sample_size(w)
-        good = good + 1 if (math.sqrt(v[0] + v[1]) < converged_std and best < consistent_chi) else 0
-        converged = good >= div_steps
+        good = good + 1 if (math.sqrt(v[0] + v[1]) < model.converged_std and best < consistent_chi) else 0
+        converged = good >= div.steps
         if converged:
             fix_e = mean[0] - nav_en[k, 0]
             fix_n = mean[1] - nav_en[k, 1]
@@ -87,12 +91,11 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, z, e0, n0, inv_re, in
         fixed_out[k] = 1 if converged else 0
         reinit_out[k] = 0
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
-            bad = bad + 1 if best > div_sigma * div_sigma else 0
-        if bad >= div_steps:
+            bad = bad + 1 if best > div.sigma * div.sigma else 0
+        if bad >= div.steps:
             init_loose(x, rng, out_en[k, 0], out_en[k, 1], half_side)
             logw[:] = 0.0
             bad = 0
             reinit_out[k] = 1
             continue
-        resample_and_regularise(x, w, logw, ess, rng, scheme, ess_thr, reg_kind, LOOSE_COLS, reg_size, 2,
-                                math.sqrt(v[0] + v[1]), min_spread, uni, idx, scratch)
+        resample_and_regularise(x, w, logw, ess, rng, rs, 2, math.sqrt(v[0] + v[1]), uni, idx, scratch)

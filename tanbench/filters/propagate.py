@@ -33,7 +33,9 @@ from tanbench.filters.trig import sin_cos
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, JAXE, JAXN, JAZE,
                                             JAZN, SX, SZ)
 
-DIST_NONE, DIST_PARTICLE, DIST_NAVIGATION = 0, 1, 2
+from tanbench.options import DISTANCE_INNOVATION
+
+DIST_NONE, DIST_PARTICLE, DIST_NAVIGATION = (DISTANCE_INNOVATION[k] for k in ("none", "particle", "navigation"))
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)

@@ -28,10 +28,11 @@ import math
 import numba as nb
 import numpy as np
 
-SYSTEMATIC, MULTINOMIAL, STRATIFIED, RESIDUAL = 0, 1, 2, 3
-REG_NONE, REG_LIU_WEST, REG_GORDON = 0, 1, 2
-REGULARISATIONS = {"none": REG_NONE, "liu-west": REG_LIU_WEST, "gordon": REG_GORDON}
-SCHEMES = {"systematic": SYSTEMATIC, "multinomial": MULTINOMIAL, "stratified": STRATIFIED, "residual": RESIDUAL}
+from tanbench.options import REGULARISATION, RESAMPLING
+
+SYSTEMATIC, MULTINOMIAL, STRATIFIED, RESIDUAL = (RESAMPLING[k] for k in ("systematic", "multinomial",
+                                                                         "stratified", "residual"))
+REG_NONE, REG_LIU_WEST, REG_GORDON = (REGULARISATION[k] for k in ("none", "liu-west", "gordon"))
 
 
 @nb.njit(cache=True)
@@ -217,26 +218,25 @@ def regularise(x, rng, kind, cols, size, dim):
 
 
 @nb.njit(cache=True)
-def resample_and_regularise(x, w, logw, ess, rng, scheme, ess_thr, reg_kind, reg_cols, reg_size, dim,
-                            spread, min_spread, uni, idx, scratch):
+def resample_and_regularise(x, w, logw, ess, rng, rs, dim, spread, uni, idx, scratch):
     """The end of an update, shared by the filters: keep log-weights bounded; if the ESS is
-    below ``ess_thr * M`` resample, regularise ``reg_cols`` and, if the horizontal cloud
-    (columns 0 and 1, std ``spread``) has collapsed below ``min_spread``, re-spread it."""
+    below ``rs.ess_threshold * M`` resample, regularise ``rs.cols`` and, if the horizontal
+    cloud (columns 0 and 1, std ``spread``) has collapsed below ``rs.min_spread``, re-spread
+    it. ``rs`` is a :class:`tanbench.filters.params.Resampling`."""
     m = x.shape[0]
     mx = logw.max()
     for j in range(m):
         logw[j] -= mx
-    if ess >= ess_thr * m:
+    if ess >= rs.ess_threshold * m:
         return
     for j in range(m):
         uni[j] = rng.random()
-    resample_indices(scheme, w, uni, idx)
+    resample_indices(rs.scheme, w, uni, idx)
     apply_resample(x, idx, scratch)
-    regularise(x, rng, reg_kind, reg_cols, reg_size, dim)
+    regularise(x, rng, rs.kind, rs.cols, rs.size, dim)
     logw[:] = 0.0
-    if spread < min_spread:
-        s = min_spread / math.sqrt(2.0)
+    if spread < rs.min_spread:
+        s = rs.min_spread / math.sqrt(2.0)
         for j in range(m):
             x[j, 0] += s * rng.standard_normal()
             x[j, 1] += s * rng.standard_normal()
-

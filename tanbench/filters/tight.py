@@ -42,27 +42,30 @@ REGULARISED_STATES = {
 
 
 @nb.njit(cache=True)
-def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, half_side, std_up, std_att, std_yaw, std_bias):
-    """Initial cloud: uniform square of side 2 * half_side around (centre_e, centre_n), Gaussians else."""
+def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
+    """Initial cloud: uniform square of side 2 * prior.half_side around (centre_e, centre_n),
+    Gaussians else (``prior`` is a :class:`tanbench.filters.params.TightPrior`)."""
+    half_side = prior.half_side
     for j in range(x.shape[0]):
         x[j, 0] = centre_e + rng.uniform(-half_side, half_side)
         x[j, 1] = centre_n + rng.uniform(-half_side, half_side)
-        x[j, 2] = up + std_up * rng.standard_normal()
-        x[j, 3] = pitch + std_att * rng.standard_normal()
-        x[j, 4] = roll + std_att * rng.standard_normal()
-        x[j, 5] = yaw + std_yaw * rng.standard_normal()
-        x[j, 6] = std_bias * rng.standard_normal()
-        x[j, 7] = std_bias * rng.standard_normal()
+        x[j, 2] = up + prior.std_up * rng.standard_normal()
+        x[j, 3] = pitch + prior.std_att * rng.standard_normal()
+        x[j, 4] = roll + prior.std_att * rng.standard_normal()
+        x[j, 5] = yaw + prior.std_yaw * rng.standard_normal()
+        x[j, 6] = prior.std_bias * rng.standard_normal()
+        x[j, 7] = prior.std_bias * rng.standard_normal()
 
 
 @nb.njit(cache=True)
-def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams,
-                      z, e0, n0, inv_re, inv_rn,
-                      sig_pos, sig_up, sig_att, dist_mode, sig_d, sig_u, outside_sigma,
-                      scheme, ess_thr, reg_kind, reg_cols, reg_size, min_spread, div_sigma, div_steps,
-                      half_side, std_up, std_att, std_yaw, std_bias,
-                      est, var, ess_out, reinit_out):
-    """Run the filter over all updates; fill est/var (K+1, 8), ess_out and reinit_out (K+1,)."""
+def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, zmap, model, rs, div,
+                      prior, est, var, ess_out, reinit_out):
+    """Run the filter over all updates; fill est/var (K+1, 8), ess_out and reinit_out (K+1,).
+
+    ``zmap``, ``model``, ``rs``, ``div`` and ``prior`` are the bundles of
+    :mod:`tanbench.filters.params` (MapArgs, TightModel, Resampling, Divergence, TightPrior).
+    """
+    z, e0, n0, inv_re, inv_rn = zmap
     m = x.shape[0]
     steps = ranges.shape[0]
     logw = np.zeros(m)
@@ -82,9 +85,10 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
             for j in range(m):
                 for c in range(6):
                     noise[j, c] = rng.standard_normal()
-            propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, sig_pos, sig_up, sig_att, dist_mode, dist)
-        best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                            dist, sig_d, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
+            propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up, model.sig_att,
+                            model.dist_mode, dist)
+        best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma,
+                            dist, model.sig_d, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
         for j in range(m):
             logw[j] += ll[j]
         normalize_log_weights(logw, w)
@@ -95,13 +99,11 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
         ess_out[k] = ess
         reinit_out[k] = 0
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
-            bad = bad + 1 if best > div_sigma * div_sigma else 0
-        if bad >= div_steps:
-            init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k],
-                       half_side, std_up, std_att, std_yaw, std_bias)
+            bad = bad + 1 if best > div.sigma * div.sigma else 0
+        if bad >= div.steps:
+            init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior)
             logw[:] = 0.0
             bad = 0
             reinit_out[k] = 1
             continue
-        resample_and_regularise(x, w, logw, ess, rng, scheme, ess_thr, reg_kind, reg_cols, reg_size, N_TIGHT,
-                                math.sqrt(v[E] + v[N]), min_spread, uni, idx, scratch)
+        resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, math.sqrt(v[E] + v[N]), uni, idx, scratch)

@@ -11,12 +11,9 @@ stored for the sweep's current cells.
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
 import time
-import types
-import typing
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -24,18 +21,15 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import pyarrow as pa
-from pydantic import BaseModel
 
 from tanbench.config import Scenario, flatten
 from tanbench.errors import TanbenchError
 from tanbench.runner import store
 from tanbench.runner.sweep import Sweep
 from tanbench.runner.tasks import Task, TaskResult, execute
+from tanbench.schema import rows_table
 
 SERIES_MODES = ("none", "summary", "full")
-# rough single-core cost of one particle-step, ns (``tanbench bench`` measures it here)
-NS_PER_PARTICLE_STEP = {"tight-dvl": 130.0, "tight-sbe": 100.0, "loose-dvl": 60.0}
 SIMULATION_S = 0.1
 
 
@@ -73,9 +67,15 @@ class RunReport:
 
 def task_cost(task: Task) -> float:
     """Estimated single-core seconds of a task (simulation + every method)."""
-    s = json.loads(task.scenario_json)
-    steps = (s.get("duration_s") or 1190.0) / s["sampling_time_s"]
-    return SIMULATION_S + sum(NS_PER_PARTICLE_STEP[m] * 1e-9 * s["particles"] * steps for m in task.methods)
+    from tanbench.methods.registry import get
+
+    scenario = _scenario_of(task.scenario_json)
+    return SIMULATION_S + sum(get(m).estimate_seconds(scenario) for m in task.methods)
+
+
+@lru_cache(maxsize=256)
+def _scenario_of(scenario_json: str) -> Scenario:
+    return Scenario(**json.loads(scenario_json))
 
 
 def default_workers() -> int:
@@ -92,7 +92,7 @@ def build_tasks(sweep: Sweep, keep_series: bool) -> list[Task]:
 
 def validate_worlds(sweep: Sweep) -> None:
     """Check every cell against its terrain: maps, track, sonar and initial uncertainty."""
-    from tanbench.filters.run import check_start_on_map
+    from tanbench.methods.api import check_start_on_map
     from tanbench.simulation import noise_free_world
     from tanbench.terrain import navigation_map
 
@@ -121,89 +121,6 @@ def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str =
     tasks = build_tasks(sweep, keep_series=series != "none")
     done = store.completed_tasks(out) if (out / "runs").is_dir() else set()
     return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers())
-
-
-# Arrow types of a run row's columns. They are fixed (the scenario parameters' from the
-# Scenario model's annotations), so every run file has the same schema whatever its
-# values (a failed run's missing metrics, a parameter left at None) and
-# ``pd.read_parquet(DIR / "runs")`` can read them together. Metrics not listed are float64.
-# (``cell_id`` is not among them: it is the Hive partition, in the directory name)
-ID_TYPES = {"sweep": pa.string(), "tables": pa.string(), "method": pa.string(),
-            "run": pa.int64(), "seed": pa.int64(), "filter_seed": pa.int64()}
-METRIC_TYPES = {"diverged": pa.bool_(), "reinitialisations": pa.int64()}
-TAIL_TYPES = {"status": pa.string(), "error": pa.string(), "wall_s": pa.float64()}
-
-
-def _arrow_type(annotation) -> pa.DataType:
-    """bool, int64, float64, or string (plain for str, JSON text for tuples and mixed types)."""
-    union = typing.get_origin(annotation) in (typing.Union, types.UnionType)
-    kinds = set()
-    for arg in typing.get_args(annotation) if union else (annotation,):
-        if arg is type(None):
-            continue
-        if arg is bool:
-            kinds.add("bool")
-        elif arg is int:
-            kinds.add("int")
-        elif arg is float:
-            kinds.add("float")
-        elif arg is str or typing.get_origin(arg) is typing.Literal:
-            kinds.add("str")
-        else:
-            kinds.add("json")
-    if kinds == {"bool"}:
-        return pa.bool_()
-    if kinds == {"int"}:
-        return pa.int64()
-    if kinds and kinds <= {"int", "float"}:
-        return pa.float64()
-    return pa.string()
-
-
-@lru_cache(maxsize=1)
-def scenario_column_types() -> dict[str, pa.DataType]:
-    """Every flattened scenario parameter (``filter.resampling``) and its Arrow type, in model order."""
-    def walk(model, prefix):
-        out = {}
-        for name, info in model.model_fields.items():
-            ann = info.annotation
-            if isinstance(ann, type) and issubclass(ann, BaseModel):
-                out.update(walk(ann, f"{prefix}{name}."))
-            else:
-                out[f"{prefix}{name}"] = _arrow_type(ann)
-        return out
-
-    return walk(Scenario, "")
-
-
-def run_schema(rows: list[dict]) -> pa.Schema:
-    """The schema of a run file: the known columns in a fixed order, then any other (inferred)."""
-    from tanbench.filters.run import METRIC_COLUMNS
-
-    metrics = {m: METRIC_TYPES.get(m, pa.float64()) for m in METRIC_COLUMNS}
-    known = {**ID_TYPES, **scenario_column_types(), **metrics, **TAIL_TYPES}
-    fields = [pa.field(k, t) for k, t in known.items()]
-    for k in dict.fromkeys(k for row in rows for k in row):
-        if k not in known:
-            inferred = pa.array([row.get(k) for row in rows], from_pandas=True).type
-            fields.append(pa.field(k, pa.float64() if pa.types.is_null(inferred) else inferred))
-    return pa.schema(fields)
-
-
-def _coerce(value, typ: pa.DataType):
-    """A row value as the column's type takes it: NaN is null outside float columns, JSON for lists."""
-    if value is None or (isinstance(value, float) and math.isnan(value) and not pa.types.is_floating(typ)):
-        return None
-    if pa.types.is_string(typ) and not isinstance(value, str):
-        return json.dumps(value)
-    return value
-
-
-def rows_table(rows: list[dict]) -> pa.Table:
-    """Run rows as an Arrow table of the fixed run-file schema."""
-    schema = run_schema(rows)
-    data = {f.name: [_coerce(row.get(f.name), f.type) for row in rows] for f in schema}
-    return pa.Table.from_pydict(data, schema=schema)
 
 
 def cell_columns(sweep: Sweep) -> dict[str, dict]:
@@ -312,7 +229,7 @@ def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progres
 
 
 def _crashed(task: Task, exc: BaseException) -> TaskResult:
-    from tanbench.filters.run import METRIC_COLUMNS
+    from tanbench.schema import METRIC_COLUMNS
 
     msg = f"worker failed: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
     rows = [{"cell_id": task.cell_id, "run": task.run, "seed": -1, "method": m, "filter_seed": -1,

@@ -42,13 +42,13 @@ def warm_up() -> None:
     import numpy as np
 
     from tanbench.config import Scenario
-    from tanbench.filters import METHODS
-    from tanbench.filters.run import run_method
+    from tanbench.methods import run_method
+    from tanbench.methods.registry import builtin_names
     from tanbench.simulation import simulate_vehicle
 
     scenario = Scenario(duration_s=3.0, particles=16)
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(0))
-    for method in METHODS:
+    for method in builtin_names():
         run_method(scenario, method, vehicle, np.random.SeedSequence(1))
 
 

@@ -18,7 +18,6 @@ from tanbench.config import Scenario
 
 VEHICLE_STREAM = 1
 FILTER_STREAM = 2
-METHOD_IDS = {"tight-dvl": 1, "tight-sbe": 2, "loose-dvl": 3}  # stable: never renumber
 
 
 def _key_int(hex_key: str) -> int:
@@ -31,9 +30,11 @@ def vehicle_seed(root: int, scenario: Scenario, run: int) -> np.random.SeedSeque
 
 
 def filter_seed(root: int, scenario: Scenario, method: str, run: int) -> np.random.SeedSequence:
-    """The seed of ``method``'s filter noise in run ``run`` of this cell."""
+    """The seed of ``method``'s filter noise in run ``run`` of this cell (its registry ``seed_id``)."""
+    from tanbench.methods.registry import get
+
     return np.random.SeedSequence(
-        root, spawn_key=(FILTER_STREAM, _key_int(scenario.cell_key()), METHOD_IDS[method], run))
+        root, spawn_key=(FILTER_STREAM, _key_int(scenario.cell_key()), get(method).seed_id, run))
 
 
 def seed_number(seed: np.random.SeedSequence) -> int:

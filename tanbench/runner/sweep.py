@@ -28,9 +28,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from tanbench.config import Scenario
 from tanbench.errors import TanbenchError
-from tanbench.filters import METHODS
 
 Value = Any
+DEFAULT_METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")  # the paper's, when a sweep names none
 
 
 class SweepSpec(BaseModel):
@@ -42,7 +42,7 @@ class SweepSpec(BaseModel):
     description: str = ""
     seed: int = Field(ge=0)
     runs: int = Field(gt=0, le=100_000)
-    methods: list[str] = Field(default_factory=lambda: list(METHODS), min_length=1)
+    methods: list[str] = Field(default_factory=lambda: list(DEFAULT_METHODS), min_length=1)
     scenario: dict[str, Any] = Field(default_factory=dict)
     tables: dict[str, dict[str, list[Value]]] = Field(default_factory=dict)
     grid: dict[str, list[Value]] | None = None
@@ -50,9 +50,13 @@ class SweepSpec(BaseModel):
     @field_validator("methods")
     @classmethod
     def _known_methods(cls, v):
+        from tanbench.methods.registry import get
+
         for m in v:
-            if m not in METHODS:
-                raise ValueError(f"unknown method {m!r} (known: {', '.join(METHODS)})")
+            try:
+                get(m)
+            except TanbenchError as exc:
+                raise ValueError(str(exc)) from None
         if len(set(v)) != len(v):
             raise ValueError("a method is listed twice")
         return v

@@ -15,11 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SERIES_COLUMNS = (
-    "t", "est_e", "est_n", "est_u", "est_heading_deg", "truth_e", "truth_n", "truth_u",
-    "truth_heading_deg", "nav_e", "nav_n", "nav_heading_deg", "east_error_m", "north_error_m",
-    "horizontal_error_m", "heading_error_deg", "nav_horizontal_error_m", "ess", "var_e", "var_n",
-)
+from tanbench.schema import METRIC_COLUMNS, SERIES_COLUMNS
 
 
 @dataclass(frozen=True)
@@ -61,7 +57,7 @@ def _describe(exc: BaseException) -> str:
 def execute(task: Task) -> TaskResult:
     """Simulate the run's vehicle data once and run every method on it."""
     from tanbench.config import Scenario
-    from tanbench.filters.run import METRIC_COLUMNS, run_method
+    from tanbench.methods import run_method
     from tanbench.runner.seeds import filter_seed, seed_number, vehicle_seed
     from tanbench.simulation import simulate_vehicle
 
@@ -78,9 +74,15 @@ def execute(task: Task) -> TaskResult:
         vehicle, vehicle_error = None, _describe(exc)
     sim_wall = time.perf_counter() - started
     for method in task.methods:
-        fseed = filter_seed(task.root_seed, scenario, method, task.run)
-        row = {**base, "method": method, "filter_seed": seed_number(fseed)}
+        row = {**base, "method": method}
         t0 = time.perf_counter()
+        try:
+            fseed = filter_seed(task.root_seed, scenario, method, task.run)
+        except Exception as exc:  # noqa: BLE001 - a user method that no longer imports here
+            rows.append({**row, "filter_seed": -1, **empty, "status": "error", "error": _describe(exc),
+                         "wall_s": 0.0})
+            continue
+        row["filter_seed"] = seed_number(fseed)
         if vehicle_error is not None:
             rows.append({**row, **empty, "status": "error", "error": f"simulation: {vehicle_error}",
                          "wall_s": sim_wall})

@@ -14,8 +14,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from collections import namedtuple
+
 import numba as nb
 import numpy as np
+
+# the map as the jitted kernels take it (a named tuple: numba passes it by value)
+MapArgs = namedtuple("MapArgs", "z e0 n0 inv_re inv_rn")
 
 
 @dataclass(frozen=True)
@@ -71,9 +76,9 @@ class Map:
             & (n <= self.n_max - margin)
         )
 
-    def kernel_args(self) -> tuple:
-        """The plain arguments the jitted kernels take: (z, e0, n0, inv_res_e, inv_res_n)."""
-        return (self.z, float(self.e0), float(self.n0), 1.0 / self.res_e, 1.0 / self.res_n)
+    def kernel_args(self):
+        """The map as the jitted kernels take it: ``MapArgs(z, e0, n0, inv_res_e, inv_res_n)``."""
+        return MapArgs(self.z, float(self.e0), float(self.n0), 1.0 / self.res_e, 1.0 / self.res_n)
 
     def elevation(self, e, n) -> np.ndarray:
         """Bilinear elevation at arrays of points; NaN outside the grid."""

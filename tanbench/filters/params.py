@@ -1,0 +1,31 @@
+"""Parameter bundles of the jitted filter loops (named tuples numba passes by value).
+
+The loops take a handful of these instead of dozens of positional numbers; each bundle
+groups the settings of one mechanism, named as in ``FilterSpec``. ``MapArgs`` is the
+navigation map as the kernels read it (``Map.kernel_args()``).
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+from tanbench.terrain.grid import MapArgs  # noqa: F401 - the map bundle, defined with the Map
+
+# resampling when ESS < ess_threshold * M, then regularisation of ``cols`` with kernel
+# ``kind`` of size ``size``; a horizontal cloud below ``min_spread`` m std is re-spread
+Resampling = namedtuple("Resampling", "scheme ess_threshold kind cols size min_spread")
+
+# divergence: the best particle's RMS innovation above ``sigma`` for ``steps`` updates
+Divergence = namedtuple("Divergence", "sigma steps")
+
+# tight filter: process noise (east/north per update, up, attitude), distance innovation
+# mode and std, altitude std, innovation charged to a beam off the map
+TightModel = namedtuple("TightModel", "sig_pos sig_up sig_att dist_mode sig_d sig_u outside_sigma")
+
+# tight filter initial cloud (and re-initialisation): uniform square of side 2 * half_side,
+# Gaussian up, attitude, heading and gyro biases
+TightPrior = namedtuple("TightPrior", "half_side std_up std_att std_yaw std_bias")
+
+# loose filter: position process noise, heading-induced cross-track noise, altitude std,
+# off-map innovation, and the horizontal std below which its estimate is a position fix
+LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma converged_std")

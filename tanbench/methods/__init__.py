@@ -1,0 +1,45 @@
+"""TAN methods: the registry, the plug-in contract, and running one method on one run.
+
+``run_method`` is what the sweep engine calls: it builds the method's
+:class:`~tanbench.methods.api.MethodContext` from the run's observations (never the
+truth), runs the method, checks its output and scores it (:mod:`tanbench.scoring`).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from tanbench.methods.api import MethodContext, MethodOutput, Updates, check_start_on_map, update_indices
+from tanbench.methods.registry import MethodRecord, get, names, register
+
+__all__ = ["MethodContext", "MethodOutput", "MethodRecord", "Updates", "get", "names", "register",
+           "run_method", "method_context", "check_start_on_map", "update_indices"]
+
+
+def method_context(scenario, name: str, vehicle, seed: np.random.SeedSequence, record=None) -> MethodContext:
+    """What method ``name`` is given for one run: observations, map, updates, rng, options."""
+    from tanbench.methods.api import method_view
+    from tanbench.terrain import navigation_map
+
+    record = record or get(name)
+    nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
+    check_start_on_map(scenario, nmap)
+    return MethodContext(name=name, scenario=method_view(scenario), obs=vehicle.obs, nmap=nmap,
+                         updates=update_indices(scenario, vehicle.obs), rng=np.random.default_rng(seed),
+                         options=record.parse_options(scenario))
+
+
+def run_method(scenario, name: str, vehicle, seed: np.random.SeedSequence):
+    """Run method ``name`` on one run's ``vehicle`` data with its filter ``seed``; score it."""
+    from tanbench.methods.api import as_output
+    from tanbench.scoring import score
+
+    record = get(name)
+    ctx = method_context(scenario, name, vehicle, seed, record)
+    started = time.perf_counter()
+    raw = record.run(ctx)
+    wall = time.perf_counter() - started
+    out = as_output(name, raw, ctx.updates.size)
+    return score(scenario, vehicle, ctx.updates, out, wall)

@@ -1,0 +1,181 @@
+"""The method registry: one record per TAN method, read by everything that names methods.
+
+A :class:`MethodRecord` says what a method is (name, one-line summary, the states it
+estimates, the series it adds), how to seed it (a stable ``seed_id``), what it costs
+(for ``tanbench plan``), how to draw it, which options it takes, and how to run it.
+
+Methods come from three places, looked up in this order:
+
+1. the built-ins, one module each in :data:`BUILTIN_MODULES` (a module registers its
+   records with :func:`register` when imported);
+2. installed packages' entry points in the group ``tanbench.methods``: the entry point's
+   name is the method name, its value a ``MethodRecord`` or a run function;
+3. a sweep's ``methods:`` entry ``package.module:function`` (or ``:RECORD``): imported
+   on first use, in the parent and in every worker.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import re
+from dataclasses import dataclass
+from typing import Callable
+
+from tanbench.errors import TanbenchError
+
+# the built-in methods: adding one is one new module plus its line here
+BUILTIN_MODULES = ("tanbench.methods.tight", "tanbench.methods.loose")
+ENTRY_POINT_GROUP = "tanbench.methods"
+_IMPORT_NAME = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
+
+_REGISTRY: dict[str, "MethodRecord"] = {}
+_builtins_loaded = False
+
+
+def particle_steps(scenario) -> float:
+    """The default cost unit: particles x updates."""
+    duration = scenario.duration_s or 1190.0
+    return scenario.particles * duration / scenario.sampling_time_s
+
+
+@dataclass(frozen=True)
+class MethodRecord:
+    """One registered method (see the module docstring)."""
+
+    name: str
+    seed_id: int  # enters the method's filter seed: never change it once results exist
+    summary: str
+    run: Callable
+    states: tuple[str, ...] = ("east", "north")
+    series: tuple[str, ...] = ()  # extra series (beyond the scored ones) the method returns
+    options: type | None = None  # a pydantic model of the method's own options
+    cost_ns: float = 100.0  # single-core ns per cost unit (plan's estimate)
+    cost_units: Callable = particle_steps  # scenario -> number of cost units of one run
+    color: str | None = None
+    linestyle: str = "-"
+    builtin: bool = False
+
+    def estimate_seconds(self, scenario) -> float:
+        return self.cost_ns * 1e-9 * float(self.cost_units(scenario))
+
+    def parse_options(self, scenario):
+        """The method's validated options from ``scenario.method_options[name]`` (None without a model)."""
+        given = (scenario.method_options or {}).get(self.name, {})
+        if self.options is None:
+            if given:
+                raise TanbenchError(f"method_options.{self.name}: method {self.name!r} takes no options")
+            return None
+        from pydantic import ValidationError
+
+        unknown = sorted(set(given) - set(self.options.model_fields))
+        if unknown:
+            raise TanbenchError(f"method_options.{self.name}.{unknown[0]}: unknown option of {self.name!r} "
+                                f"(known: {', '.join(self.options.model_fields)})")
+        try:
+            return self.options(**given)
+        except ValidationError as exc:
+            from tanbench.runner.sweep import format_validation_error
+
+            raise TanbenchError(format_validation_error(exc, f"method_options.{self.name}.")) from None
+
+
+def register(record: MethodRecord) -> MethodRecord:
+    """Add a method; a second record with the same name or seed id is an error."""
+    if record.name in _REGISTRY and _REGISTRY[record.name] is not record:
+        raise TanbenchError(f"method {record.name!r} is registered twice")
+    for other in _REGISTRY.values():
+        if other.seed_id == record.seed_id and other.name != record.name:
+            raise TanbenchError(f"methods {other.name!r} and {record.name!r} share seed id {record.seed_id}")
+    _REGISTRY[record.name] = record
+    return record
+
+
+def _load_builtins() -> None:
+    global _builtins_loaded
+    if _builtins_loaded:
+        return
+    _builtins_loaded = True
+    for module in BUILTIN_MODULES:
+        importlib.import_module(module)
+
+
+def names() -> tuple[str, ...]:
+    """The built-in and installed methods' names, built-ins first in registration order."""
+    _load_builtins()
+    _load_entry_points()
+    return tuple(_REGISTRY)
+
+
+def builtin_names() -> tuple[str, ...]:
+    _load_builtins()
+    return tuple(n for n, r in _REGISTRY.items() if r.builtin)
+
+
+_entry_points_loaded = False
+
+
+def _load_entry_points() -> None:
+    global _entry_points_loaded
+    if _entry_points_loaded:
+        return
+    _entry_points_loaded = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name not in _REGISTRY:
+            try:
+                obj = ep.load()
+            except Exception as exc:  # noqa: BLE001 - a broken plug-in package is one line, not a crash
+                raise TanbenchError(f"method {ep.name!r} (entry point {ep.value}) does not load: "
+                                    f"{type(exc).__name__}: {exc}") from None
+            register(_as_record(ep.name, obj, ep.value))
+
+
+def get(name: str) -> MethodRecord:
+    """The record of method ``name``: a registered name or ``package.module:function``."""
+    _load_builtins()
+    if name in _REGISTRY:
+        return _REGISTRY[name]
+    if _IMPORT_NAME.match(name):
+        return register(_import_method(name))
+    _load_entry_points()
+    if name in _REGISTRY:
+        return _REGISTRY[name]
+    raise TanbenchError(f"unknown method {name!r}; known: {', '.join(names())} "
+                        f"(or a user method as package.module:function)")
+
+
+def _import_method(name: str) -> MethodRecord:
+    module_name, attr = name.split(":", 1)
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        raise TanbenchError(f"method {name!r}: module {exc.name!r} not found (is it on PYTHONPATH, "
+                            f"or installed?)") from None
+    except Exception as exc:  # noqa: BLE001 - the user's module failed while importing
+        raise TanbenchError(f"method {name!r}: importing {module_name} failed: {type(exc).__name__}: {exc}") from None
+    obj = module
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise TanbenchError(f"method {name!r}: {module_name} has no attribute {attr!r}")
+        obj = getattr(obj, part)
+    return _as_record(name, obj, name)
+
+
+def _as_record(name: str, obj, source: str) -> MethodRecord:
+    """A user's object as a record: a MethodRecord (renamed to ``name``) or a run function."""
+    import dataclasses
+
+    if isinstance(obj, MethodRecord):
+        return dataclasses.replace(obj, name=name, seed_id=user_seed_id(name), builtin=False)
+    if not callable(obj):
+        raise TanbenchError(f"method {name!r}: {source} is a {type(obj).__name__}, not a function or MethodRecord")
+    doc = (getattr(obj, "__doc__", None) or "").strip().splitlines()
+    return MethodRecord(name=name, seed_id=user_seed_id(name), summary=doc[0] if doc else f"user method {source}",
+                        run=obj)
+
+
+def user_seed_id(name: str) -> int:
+    """A stable seed id for a user method, from its name (above the built-ins' small ids)."""
+    return (1 << 32) + int(hashlib.sha256(name.encode()).hexdigest()[:8], 16)

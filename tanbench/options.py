@@ -1,0 +1,21 @@
+"""Option codes: the one table of every enumerated setting's allowed values and kernel codes.
+
+``tanbench.config`` builds its ``Literal`` types from these tables and the jitted kernels
+take the integer codes, so an allowed value and its code are written down once. Plain
+Python, no numerical imports (``config`` imports it).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+RESAMPLING = {"systematic": 0, "multinomial": 1, "stratified": 2, "residual": 3}
+REGULARISATION = {"none": 0, "liu-west": 1, "gordon": 2}
+DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}
+# which tight-filter states the regularisation jitters (state indices in filters/tight.py)
+REGULARISED_STATES = ("position-heading-biases", "heading-biases", "biases")
+
+
+def choices(values):
+    """A ``Literal`` of a table's names (a dict's keys or a tuple), in table order."""
+    return Literal[tuple(values)]

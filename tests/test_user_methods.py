@@ -1,0 +1,161 @@
+"""User methods from a sweep file: the worked example in examples/, run from outside the tree.
+
+The example plug-ins are copied to a temporary directory (so nothing of the repository
+is importable but the installed tanbench), put on PYTHONPATH, and run in one sweep
+beside two built-ins with 2 local workers and on a local Dask cluster: the runs must be
+identical. They appear in the tables, the figures and `tanbench check`, and pass the
+public conformance check. Bad plug-ins get one clear line and nothing stored is lost.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+import yaml
+
+from sweep_support import ROOT, assert_same_runs, cli, cli_env, error_lines
+from tanbench import results
+
+DR = "tan_plugins.dead_reckoning:run"
+PF = "tan_plugins.numpy_pf:METHOD"
+
+
+@pytest.fixture(scope="module")
+def plugin_dir(tmp_path_factory):
+    """The example plug-ins and their sweep, copied outside the repository (2 runs, 120 s)."""
+    base = tmp_path_factory.mktemp("userland")
+    shutil.copytree(ROOT / "examples" / "tan_plugins", base / "tan_plugins")
+    sweep = yaml.safe_load((ROOT / "examples" / "run_sweep.yaml").read_text())
+    sweep["runs"] = 2
+    sweep["scenario"]["duration_s"] = 120
+    sweep["scenario"]["particles"] = 300
+    (base / "sweep.yaml").write_text(yaml.safe_dump(sweep, sort_keys=False))
+    return base
+
+
+@pytest.fixture(scope="module")
+def two_ways(plugin_dir):
+    """The example sweep with --workers 2 and with --scheduler local-dask."""
+    outs = {}
+    for label, args in (("local", ["--workers", 2]), ("dask", ["--scheduler", "local-dask", "--workers", 2])):
+        out = plugin_dir / f"out-{label}"
+        proc = cli("run", plugin_dir / "sweep.yaml", "--out", out, "-q", *args, extra_path=plugin_dir,
+                   cwd=plugin_dir, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        outs[label] = out
+    return outs
+
+
+@pytest.mark.slow
+def test_user_methods_run_beside_builtins_identically_on_both_executors(two_ways):
+    local, dask = (results.load(two_ways[k]) for k in ("local", "dask"))
+    assert set(local["method"]) == {"tight-dvl", "loose-dvl", DR, PF}
+    assert (local["status"] == "ok").all(), local.loc[local["status"] != "ok", "error"].tolist()
+    assert_same_runs(local, dask)
+
+
+@pytest.mark.slow
+def test_user_methods_in_tables_figures_and_check(two_ways, plugin_dir):
+    out = two_ways["local"]
+    proc = cli("tables", out, extra_path=plugin_dir, cwd=plugin_dir)
+    assert proc.returncode == 0, proc.stderr
+    assert DR in proc.stdout and PF in proc.stdout
+    plot = cli("plot", out, extra_path=plugin_dir, cwd=plugin_dir)
+    assert plot.returncode == 0, plot.stderr
+    assert list((out / "figures").glob("*.png"))
+    check = cli("check", two_ways["dask"], out, extra_path=plugin_dir, cwd=plugin_dir)
+    assert check.returncode == 0, check.stdout + check.stderr
+    assert PF in check.stdout
+
+
+@pytest.mark.slow
+def test_dead_reckoning_plugin_is_the_navigation_solution(two_ways):
+    runs = results.load(two_ways["local"])
+    dr = runs[runs["method"] == DR].set_index(["cell_id", "run"])
+    tight = runs[runs["method"] == "tight-dvl"].set_index(["cell_id", "run"])
+    # terrain aiding beats the navigation system alone on area A
+    assert (tight["final_horizontal_error_m"] < dr["final_horizontal_error_m"]).all()
+
+
+@pytest.mark.parametrize("method", [DR, PF])
+def test_example_plugins_pass_the_public_conformance_check(plugin_dir, method):
+    code = f"from tanbench.testing import check_method; print(check_method({method!r}).checks)"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=plugin_dir,
+                          env=cli_env(plugin_dir), timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "identical in a worker process" in proc.stdout
+
+
+BAD_PLUGINS = {
+    "no_such_module_xyz:run": "module 'no_such_module_xyz' not found",
+    "tan_plugins.dead_reckoning:nothing": "has no attribute 'nothing'",
+    "tan_plugins.broken:run": "importing tan_plugins.broken failed: ZeroDivisionError",
+}
+
+
+@pytest.mark.parametrize("name, message", sorted(BAD_PLUGINS.items()))
+def test_a_plugin_that_does_not_load_is_one_line(plugin_dir, tmp_path, name, message):
+    (plugin_dir / "tan_plugins" / "broken.py").write_text("x = 1 / 0\n")
+    sweep = yaml.safe_load((plugin_dir / "sweep.yaml").read_text())
+    sweep["methods"] = ["tight-dvl", name]
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(sweep))
+    proc = cli("validate", path, extra_path=plugin_dir, cwd=plugin_dir)
+    assert proc.returncode == 2
+    lines = error_lines(proc.stderr)
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in proc.stderr, proc.stderr
+
+
+WRONG_OUTPUTS = {
+    "shape": ("return {'east': ctx.nav.pos[:3, 0], 'north': ctx.nav.pos[:3, 1]}", "has shape (3,)"),
+    "nan": ("import numpy as np\n    k = ctx.updates.size\n    return {'east': np.full(k, np.nan), "
+            "'north': np.zeros(k)}", "east is not finite"),
+    "key": ("k = ctx.updates.size\n    return {'east': [0.0] * k, 'north': [0.0] * k, 'speed': [0.0] * k}",
+            "unknown key(s) 'speed'"),
+    "raises": ("raise RuntimeError('inside the run')", "RuntimeError: inside the run"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(WRONG_OUTPUTS))
+def test_a_plugin_that_misbehaves_in_a_run_is_recorded_per_run(plugin_dir, tmp_path, case):
+    body, message = WRONG_OUTPUTS[case]
+    (plugin_dir / "tan_plugins" / f"wrong_{case}.py").write_text(f"def run(ctx):\n    {body}\n")
+    sweep = yaml.safe_load((plugin_dir / "sweep.yaml").read_text())
+    sweep.update(runs=1, methods=["tight-dvl", f"tan_plugins.wrong_{case}:run"], tables={})
+    sweep["scenario"].update(duration_s=60, particles=100)
+    sweep["scenario"].pop("method_options")
+    path = tmp_path / "wrong.yaml"
+    path.write_text(yaml.safe_dump(sweep))
+    out = tmp_path / "out"
+    proc = cli("run", path, "--out", out, "--workers", 1, "-q", extra_path=plugin_dir, cwd=plugin_dir)
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    runs = pd.read_parquet(out / "runs")
+    bad = runs[runs["method"] != "tight-dvl"]
+    assert (bad["status"] == "error").all() and bad["error"].str.contains(message, regex=False).all(), \
+        bad["error"].tolist()
+    assert (runs.loc[runs["method"] == "tight-dvl", "status"] == "ok").all()
+
+
+def test_unknown_method_lists_the_known_ones(tmp_path):
+    sweep = yaml.safe_load((ROOT / "examples" / "run_sweep.yaml").read_text())
+    sweep["methods"] = ["tight-dvl", "magic"]
+    sweep["scenario"].pop("method_options")
+    path = tmp_path / "s.yaml"
+    path.write_text(yaml.safe_dump(sweep))
+    proc = cli("validate", path)
+    assert proc.returncode == 2
+    line = error_lines(proc.stderr)[0]
+    assert "unknown method 'magic'" in line and "tight-dvl, tight-sbe, loose-dvl" in line
+
+
+def test_methods_command_lists_every_builtin_with_its_options():
+    proc = cli("methods", "--options")
+    assert proc.returncode == 0, proc.stderr
+    for name in ("tight-dvl", "tight-sbe", "loose-dvl"):
+        assert name in proc.stdout
+    assert "filter.*" in proc.stdout
