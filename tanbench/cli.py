@@ -53,6 +53,7 @@ def run(
                                             help="Dask scheduler address (tcp://host:8786) or 'local-dask'."),
     runs: Optional[int] = typer.Option(None, "--runs", min=1, help="Override the sweep's runs per cell."),
     force: bool = typer.Option(False, "--force", help="Recompute runs already stored."),
+    add: bool = typer.Option(False, "--add", help="Add to a results directory that holds another sweep's runs."),
     series: str = typer.Option("summary", "--series", help="Per-update series to keep: none, summary or full."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ):
@@ -68,7 +69,7 @@ def run(
     again = f"tanbench run {sweep_file} --out {out}" + (f" --runs {runs}" if runs is not None else "") + (
         f" --series {series}" if series != "summary" else "")
     try:
-        report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force,
+        report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force, add=add,
                            progress=not quiet, echo=typer.echo)
     except KeyboardInterrupt:  # before the tasks (validation) or after them (tables): nothing half-done
         typer.echo(f"interrupted; resume with: {again}", err=True)

@@ -108,7 +108,10 @@ def test_cells_shared_by_tables_run_once(base):
     plan = cli("plan", sweep, "--out", out)
     assert f"{N_CELLS} cell(s) x 3 method(s) x {RUNS} run(s) = {N_CELLS * 3 * RUNS} runs in {N_TASKS} task(s)" \
         in plan.stdout
-    assert len(store.completed_tasks(out)) == N_TASKS
+    from tanbench.runner.engine import build_tasks, expected_seeds
+    from tanbench.runner.sweep import load_sweep
+
+    assert len(store.completed_tasks(out, expected_seeds(build_tasks(load_sweep(sweep), False)))) == N_TASKS
     # when the session ended, each cell's task files were merged into one file
     assert len(list((out / "runs").glob("*/runs.parquet"))) == N_CELLS
     assert not list((out / "runs").glob("*/run-*.parquet"))

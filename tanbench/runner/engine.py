@@ -90,6 +90,48 @@ def build_tasks(sweep: Sweep, keep_series: bool) -> list[Task]:
             for run in range(sweep.spec.runs) for cell_id, spec in cells]
 
 
+def expected_seeds(tasks: list[Task]) -> dict:
+    """Per task (cell_id, run): {method: (vehicle seed, filter seed)} as stored in its rows."""
+    from tanbench.runner.seeds import filter_seed, seed_number, vehicle_seed
+
+    out = {}
+    for task in tasks:
+        scenario = _scenario_of(task.scenario_json)
+        vseed = seed_number(vehicle_seed(task.root_seed, scenario, task.run))
+        out[task.key] = {m: (vseed, seed_number(filter_seed(task.root_seed, scenario, m, task.run)))
+                         for m in task.methods}
+    return out
+
+
+def check_directory_owner(sweep: Sweep, out: Path, add: bool) -> None:
+    """A results directory belongs to one sweep: refuse another sweep's name unless ``add``."""
+    path = out / "sweep.yaml"
+    if add or not path.exists() or not store.run_files(out):
+        return
+    try:
+        import yaml
+
+        previous = (yaml.safe_load(path.read_text()) or {}).get("name")
+    except (OSError, ValueError, AttributeError):
+        previous = None
+    if previous is not None and previous != sweep.name:
+        raise TanbenchError(f"{out} holds the results of sweep {previous!r}, not {sweep.name!r}: use another --out, "
+                            f"or --add to add this sweep's cells to it")
+
+
+def check_not_stale(sweep: Sweep, out: Path, force: bool) -> None:
+    """Refuse to mix stored runs that this sweep would compute differently (another root seed)."""
+    if force or not store.run_files(out):
+        return
+    stale = store.stale_rows(out, expected_seeds(build_tasks(sweep, keep_series=False)))
+    if len(stale):
+        cells = stale["cell_id"].nunique()
+        raise TanbenchError(
+            f"{out} holds {len(stale)} run(s) of {cells} of this sweep's cells made with other seeds (was the "
+            f"sweep's root seed {sweep.spec.seed} changed?); they would come out differently now: rerun with "
+            f"--force to recompute those cells, or use another --out")
+
+
 def validate_worlds(sweep: Sweep) -> None:
     """Check every cell against its terrain: maps, track, sonar and initial uncertainty."""
     from tanbench.methods.api import check_start_on_map
@@ -119,7 +161,7 @@ def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str =
     if series not in SERIES_MODES:
         raise TanbenchError(f"--series must be one of {', '.join(SERIES_MODES)}")
     tasks = build_tasks(sweep, keep_series=series != "none")
-    done = store.completed_tasks(out) if (out / "runs").is_dir() else set()
+    done = store.completed_tasks(out, expected_seeds(tasks)) if (out / "runs").is_dir() else set()
     return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers())
 
 
@@ -144,7 +186,8 @@ def store_result(result: TaskResult, plan: Plan, columns: dict, meta: dict, full
 
 
 def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: str | None = None,
-              series: str = "summary", force: bool = False, progress: bool = True, echo=print) -> RunReport:
+              series: str = "summary", force: bool = False, progress: bool = True, echo=print,
+              add: bool = False) -> RunReport:
     """Run (or resume) ``sweep`` into ``out``; returns a :class:`RunReport`."""
     from tanbench.results import build_outputs
 
@@ -152,6 +195,8 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     store.remove_stale_temporaries(out)
     store.check_existing_schema(out)
     validate_worlds(sweep)
+    check_directory_owner(sweep, out, add)
+    check_not_stale(sweep, out, force)
     if force:
         store.remove_cells(out, [c.cell_id for c in sweep.cells])
     plan = make_plan(sweep, out, workers, series)

@@ -237,15 +237,50 @@ def read_dataset(directory: Path) -> pd.DataFrame:
         raise TanbenchError(f"{directory}: cannot read the results ({str(exc).splitlines()[0]})") from None
 
 
-def completed_tasks(out: Path) -> set[tuple[str, int]]:
-    """(cell_id, run) of tasks whose every row finished with status 'ok'."""
-    done, failed = set(), set()
+def stored_rows(out: Path, cell_ids=None) -> pd.DataFrame:
+    """The identity columns of every stored run row (of ``cell_ids``, default all): cell_id,
+    run, method, seed, filter_seed, status."""
+    wanted = None if cell_ids is None else set(cell_ids)
+    frames = []
     for path in run_files(out):
-        df = read_parquet(path, columns=["run", "status"])
-        for run, status in df.groupby("run")["status"]:
-            key = (cell_of(path), int(run))
-            (done if (status == "ok").all() else failed).add(key)
-    return done - failed
+        cell = cell_of(path)
+        if wanted is not None and cell not in wanted:
+            continue
+        df = read_parquet(path, columns=["run", "method", "seed", "filter_seed", "status"])
+        df.insert(0, "cell_id", cell)
+        frames.append(df)
+    if not frames:
+        return pd.DataFrame(columns=["cell_id", "run", "method", "seed", "filter_seed", "status"])
+    df = pd.concat(frames, ignore_index=True)
+    return df.drop_duplicates(subset=["cell_id", "method", "run"], keep="last")
+
+
+def completed_tasks(out: Path, expected: dict) -> set[tuple[str, int]]:
+    """(cell_id, run) of the tasks stored exactly as they would be computed now.
+
+    ``expected`` maps (cell_id, run) to ``{method: (seed, filter_seed)}``: a task is done
+    when every one of its methods has a row with status "ok" and the same seeds. A
+    method added to a sweep, or a root seed changed, thus leaves the task to do.
+    """
+    rows = stored_rows(out, {cell for cell, _ in expected})
+    have = {(r.cell_id, int(r.run), r.method): (r.status, int(r.seed), int(r.filter_seed))
+            for r in rows.itertuples(index=False) if r.status == "ok"}
+    done = set()
+    for key, methods in expected.items():
+        if all(have.get((*key, m), ("", -1, -1))[1:] == seeds for m, seeds in methods.items()):
+            done.add(key)
+    return done
+
+
+def stale_rows(out: Path, expected: dict) -> pd.DataFrame:
+    """Stored rows of the expected tasks and methods whose seeds differ from what they would be now."""
+    rows = stored_rows(out, {cell for cell, _ in expected})
+    if rows.empty:
+        return rows
+    want = [expected.get((r.cell_id, int(r.run)), {}).get(r.method) for r in rows.itertuples(index=False)]
+    stale = [w is not None and (int(r.seed), int(r.filter_seed)) != w
+             for w, r in zip(want, rows.itertuples(index=False))]
+    return rows[stale].reset_index(drop=True)
 
 
 def remove_stale_temporaries(out: Path) -> list[Path]:

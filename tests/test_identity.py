@@ -1,0 +1,130 @@
+"""Cell identities: a stored run is reused exactly when it would come out the same.
+
+* an option added with its neutral default changes no cell key, world key or seed, so
+  the committed results still match (checked here on every committed results directory
+  with a Scenario model extended by such an option);
+* the option at another value, or a default changed on purpose, changes the keys;
+* on resume, runs with other seeds (a changed root seed) are not reused, a method added
+  to a sweep runs for every stored run, and another sweep's directory is refused.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from pydantic import create_model
+
+from sweep_support import ROOT, cli, error_lines, sweep_dict, write_sweep
+from tanbench import results
+from tanbench.config import FilterSpec, Scenario, new_option
+from tanbench.runner.sweep import load_sweep
+
+COMMITTED = sorted(p.parent for p in (ROOT / "results").glob("*/sweep.yaml"))
+
+
+def extended_scenario(default=5.0, neutral=5.0):
+    """The Scenario model with a new filter option ``pmf_grid_m`` (as a new method would add)."""
+    filter_spec = create_model("FilterSpecPlus", __base__=FilterSpec,
+                               pmf_grid_m=(float, new_option(default, neutral=neutral, gt=0)))
+    return create_model("ScenarioPlus", __base__=Scenario, filter=(filter_spec, filter_spec()))
+
+
+@pytest.mark.parametrize("directory", COMMITTED, ids=[p.name for p in COMMITTED])
+def test_a_defaulted_new_option_keeps_every_committed_cell_key(directory):
+    plus = extended_scenario()
+    stored = {p.name.split("=", 1)[1] for p in (directory / "runs").glob("cell_id=*")}
+    sweep = load_sweep(directory / "sweep.yaml")
+    assert {c.cell_id for c in sweep.cells} == stored
+    for cell in sweep.cells:
+        again = plus(**cell.scenario.normalized())
+        assert again.filter.pmf_grid_m == 5.0
+        assert again.cell_key() == cell.cell_id
+        assert again.world_key() == cell.scenario.world_key()
+
+
+def test_the_new_option_at_another_value_or_a_changed_default_changes_the_key():
+    base = Scenario()
+    assert extended_scenario()(filter={"pmf_grid_m": 2.0}).cell_key() != base.cell_key()
+    # a default changed on purpose keeps the old behaviour as neutral: keys change
+    assert extended_scenario(default=2.0, neutral=5.0)().cell_key() != base.cell_key()
+    # world keys only cover the world: a filter option never changes the vehicle data
+    assert extended_scenario()(filter={"pmf_grid_m": 2.0}).world_key() == base.world_key()
+
+
+def test_method_options_at_their_default_are_neutral():
+    assert Scenario(method_options={}).cell_key() == Scenario().cell_key()
+    assert Scenario(method_options={"x.y:run": {"a": 1}}).cell_key() != Scenario().cell_key()
+
+
+@pytest.mark.parametrize("directory", COMMITTED, ids=[p.name for p in COMMITTED])
+def test_committed_runs_tabulate_to_the_committed_tables(directory):
+    """Today's code, tabulating the committed runs, writes exactly the committed tables/*.md."""
+    from tanbench.results import sweep_tables, to_markdown
+
+    tables = sweep_tables(results.load(directory), load_sweep(directory / "sweep.yaml"))
+    committed = sorted((directory / "tables").glob("*.md"))
+    assert [p.stem for p in committed] == sorted(tables)
+    for md in committed:
+        assert to_markdown(tables[md.stem], title=md.stem).strip() == md.read_text().strip(), md.name
+
+
+def test_ci_baseline_checks_against_itself():
+    proc = cli("check", ROOT / "results" / "ci-baseline", ROOT / "results" / "ci-baseline")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+@pytest.fixture
+def stored(tmp_path):
+    data = sweep_dict(runs=2, methods=["tight-dvl"], tables={})
+    path = write_sweep(tmp_path / "s.yaml", data)
+    out = tmp_path / "out"
+    proc = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert proc.returncode == 0, proc.stderr
+    return data, out, tmp_path
+
+
+def test_a_method_added_to_a_sweep_runs_for_every_stored_run(stored):
+    data, out, tmp = stored
+    before = results.load(out)
+    data["methods"] = ["tight-dvl", "tight-sbe"]
+    proc = cli("run", write_sweep(tmp / "s.yaml", data), "--out", out, "--workers", 1, "-q")
+    assert proc.returncode == 0, proc.stderr
+    runs = results.load(out)
+    assert (runs.groupby("method")["run"].nunique() == 2).all()
+    old = runs[runs["method"] == "tight-dvl"].sort_values("run")
+    assert list(old["final_horizontal_error_m"]) == list(before.sort_values("run")["final_horizontal_error_m"])
+
+
+def test_a_changed_root_seed_does_not_reuse_runs(stored):
+    data, out, tmp = stored
+    before = sorted((out / "runs").rglob("*.parquet"))
+    stamps = [p.stat().st_mtime_ns for p in before]
+    data["seed"] += 1
+    path = write_sweep(tmp / "s.yaml", data)
+    proc = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert proc.returncode == 2
+    lines = error_lines(proc.stderr)
+    assert len(lines) == 1 and "made with other seeds" in lines[0] and "--force" in lines[0]
+    assert [p.stat().st_mtime_ns for p in before] == stamps  # nothing stored changed
+    forced = cli("run", path, "--out", out, "--workers", 1, "-q", "--force")
+    assert forced.returncode == 0, forced.stderr
+    runs = results.load(out)
+    from tanbench.runner.seeds import seed_number, vehicle_seed
+
+    sc = load_sweep(path).cells[0].scenario
+    assert set(runs["seed"]) == {seed_number(vehicle_seed(data["seed"], sc, r)) for r in (0, 1)}
+
+
+def test_another_sweep_into_the_same_directory_is_refused_unless_added(stored):
+    data, out, tmp = stored
+    other = dict(data, name="other")
+    path = write_sweep(tmp / "o.yaml", other)
+    proc = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert proc.returncode == 2
+    line = error_lines(proc.stderr)[0]
+    assert "holds the results of sweep 'tiny'" in line and "--add" in line
+    assert yaml.safe_load((Path(out) / "sweep.yaml").read_text())["name"] == "tiny"
+    added = cli("run", path, "--out", out, "--workers", 1, "-q", "--add")
+    assert added.returncode == 0, added.stderr
