@@ -5,7 +5,6 @@ update and, as its uncertainty, the initial position uncertainty (a uniform squa
 side ``filter.initial_area_m``) grown by the velocity process noise.
 """
 
-import numpy as np
 
 
 def run(ctx):
