@@ -6,7 +6,6 @@ side ``filter.initial_area_m``) grown by the velocity process noise.
 """
 
 
-
 def run(ctx):
     """Dead reckoning: the navigation system's solution, no terrain aiding."""
     upd = ctx.updates.imu
