@@ -20,12 +20,17 @@ SPARE_COLORS = ("tab:green", "tab:orange", "tab:brown", "tab:pink", "tab:olive",
 
 
 def method_styles(methods) -> dict[str, tuple[str, str]]:
-    """(line style, colour) per method: the registry's plot style, spare colours for the rest."""
+    """(line style, colour) per method: the registry's plot style, spare colours for the rest
+    (and for a user method that cannot be imported where the figures are drawn)."""
     from tanbench.methods.registry import get
 
     out, spare = {}, iter(SPARE_COLORS * 4)
     for m in methods:
-        record = get(m)
+        try:
+            record = get(m)
+        except TanbenchError:
+            out[m] = ("-", next(spare))
+            continue
         out[m] = (record.linestyle, record.color or next(spare))
     return out
 
