@@ -17,17 +17,9 @@ from scipy.io import netcdf_file
 
 from tanbench.errors import TanbenchError
 from tanbench.terrain.grid import Map
-from tanbench.terrain.readers import (
-    fill_holes,
-    find_holes,
-    local_to_lonlat,
-    lonlat_to_local,
-    mosaic,
-    parse_bounds_from_name,
-    read_grid,
-    read_tiles,
-    to_local,
-)
+from tanbench.terrain.files import read_grid, read_tiles
+from tanbench.terrain.georef import local_to_lonlat, lonlat_to_local, parse_bounds_from_name, to_local
+from tanbench.terrain.mosaic import fill_holes, find_holes, mosaic
 
 A, B, C = -50.0, 0.02, -0.035
 NX, NY = 23, 17

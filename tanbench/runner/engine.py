@@ -239,13 +239,16 @@ def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progres
     from tqdm import tqdm
 
     from tanbench.runner.executors import open_executor
+    from tanbench.terrain import file_truth_maps
 
     columns = cell_columns(plan.sweep)
     n_methods = len(plan.sweep.spec.methods)
     workers = min(plan.workers, len(todo)) if scheduler is None else plan.workers
+    # read here (validate_worlds did), shipped to the workers: they never read map files
+    truth_maps = file_truth_maps(cell.scenario.terrain for cell in plan.sweep.cells)
     # the executor first: if it cannot start (a Dask address that does not answer), the
     # user sees its one error line and no half-drawn progress bar
-    with open_executor(workers, scheduler) as handle:
+    with open_executor(workers, scheduler, truth_maps) as handle:
         bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
                    dynamic_ncols=True, smoothing=0.05, desc=f"{plan.sweep.name} on {handle.description}")
         pending = {}

@@ -8,12 +8,19 @@ threaded (numba and BLAS threads = 1, so parallelism is one task per worker) and
 compiles (or loads from the on-disk cache) the numba kernels once, in its initialiser.
 Workers of an existing Dask cluster are started by their operator: start them with
 ``NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1`` (tanbench only warms them up).
+
+Workers never read the user's files: the truth maps of a sweep's file terrains, read
+once by the client, go to every worker (through the local pool's initialiser, or a Dask
+worker plugin that also reaches workers joining later) and are installed there with
+:func:`tanbench.terrain.install_truth_maps`.
 """
 
 from __future__ import annotations
 
+import hashlib
 import multiprocessing
 import os
+import pickle
 import signal
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
@@ -52,9 +59,20 @@ def warm_up() -> None:
         run_method(scenario, method, vehicle, np.random.SeedSequence(1))
 
 
-def _local_worker_init() -> None:
+def install_worker_maps(maps: dict) -> None:
+    """Install shipped truth maps in this worker; drop worlds simulated on earlier ones."""
+    from tanbench.simulation import noise_free_world
+    from tanbench.terrain import install_truth_maps
+
+    install_truth_maps(maps)
+    noise_free_world.cache_clear()
+
+
+def _local_worker_init(maps_pickle: bytes) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
     single_thread_environment()
+    # the maps come pickled so that numpy is imported only after the line above
+    install_worker_maps(pickle.loads(maps_pickle))
     warm_up()
 
 
@@ -75,11 +93,16 @@ class ExecutorHandle:
 
 
 @contextmanager
-def open_executor(workers: int, scheduler: str | None):
-    """Yield an :class:`ExecutorHandle` for ``workers`` local processes or a Dask scheduler."""
+def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None = None):
+    """Yield an :class:`ExecutorHandle` for ``workers`` local processes or a Dask scheduler.
+
+    ``truth_maps`` (from :func:`tanbench.terrain.file_truth_maps`) are installed on every
+    worker before it runs a task.
+    """
+    maps_pickle = pickle.dumps(truth_maps or {}, protocol=pickle.HIGHEST_PROTOCOL)
     if scheduler is None:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_local_worker_init)
+                                   initializer=_local_worker_init, initargs=(maps_pickle,))
 
         def stop_now():
             for proc in list(getattr(pool, "_processes", {}).values()):
@@ -92,12 +115,24 @@ def open_executor(workers: int, scheduler: str | None):
             pool.shutdown(wait=True, cancel_futures=True)
         return
     with _dask_client(workers, scheduler) as (client, description):
+        from tanbench.runner.dask_plugin import TruthMapsPlugin
+
+        plugin_name = f"tanbench-truth-maps-{hashlib.sha256(maps_pickle).hexdigest()[:16]}"
         try:
+            if truth_maps:
+                client.register_plugin(TruthMapsPlugin(maps_pickle), name=plugin_name)
             client.run(_dask_worker_init)
         except Exception as exc:  # noqa: BLE001 - a worker that cannot start is a user-facing problem
             raise TanbenchError(f"Dask workers at {scheduler} could not start tanbench: {exc}") from None
         executor = client.get_executor(pure=False)
-        yield ExecutorHandle(executor, description, lambda: executor.shutdown(wait=False))
+        try:
+            yield ExecutorHandle(executor, description, lambda: executor.shutdown(wait=False))
+        finally:
+            if truth_maps:
+                try:
+                    client.unregister_worker_plugin(plugin_name)
+                except Exception:  # noqa: BLE001 - the cluster may be gone; the maps go with it
+                    pass
 
 
 @contextmanager

@@ -3,6 +3,10 @@
 ``truth_map(spec)`` and ``navigation_map(spec, resolution_m)`` are cached per process,
 keyed by the normalised terrain spec, so a sweep synthesises or reads each seafloor
 and derives each map once per worker, not once per run.
+
+Workers never read map files: the process that runs a sweep reads each file terrain
+once (:func:`file_truth_maps`) and ships the maps to its workers, which install them
+with :func:`install_truth_maps`; ``truth_map`` then returns the installed map.
 """
 
 from __future__ import annotations
@@ -12,7 +16,10 @@ from functools import lru_cache
 
 from tanbench.terrain.grid import Map
 
-__all__ = ["Map", "truth_map", "navigation_map"]
+__all__ = ["Map", "truth_map", "navigation_map", "file_truth_maps", "install_truth_maps"]
+
+# truth maps shipped to this process, by terrain key (see install_truth_maps)
+_INSTALLED: dict[str, Map] = {}
 
 
 def _key(spec) -> str:
@@ -21,12 +28,39 @@ def _key(spec) -> str:
 
 def truth_map(spec) -> Map:
     """The true seafloor for a :class:`tanbench.config.TerrainSpec`."""
-    return _truth_cached(_key(spec))
+    return _truth(_key(spec))
 
 
 def navigation_map(spec, resolution_m: float) -> Map:
     """The navigation map at ``resolution_m`` derived from :func:`truth_map` (cached)."""
     return _navigation_cached(_key(spec), float(resolution_m))
+
+
+def file_truth_maps(specs) -> dict[str, Map]:
+    """The truth maps of the file terrains among ``specs``, by terrain key, read here (once)."""
+    return {_key(spec): truth_map(spec) for spec in specs if spec.kind == "file"}
+
+
+def install_truth_maps(maps: dict[str, Map]) -> None:
+    """Use these truth maps (from :func:`file_truth_maps` in another process) in this one.
+
+    Navigation maps derived earlier are dropped, so none outlives the map it came from.
+    """
+    _INSTALLED.update(maps)
+    _navigation_cached.cache_clear()
+
+
+def uninstall_truth_maps(maps: dict[str, Map]) -> None:
+    """Stop using these installed truth maps (those not replaced since)."""
+    for key, grid in maps.items():
+        if _INSTALLED.get(key) is grid:
+            del _INSTALLED[key]
+    _navigation_cached.cache_clear()
+
+
+def _truth(key: str) -> Map:
+    installed = _INSTALLED.get(key)
+    return installed if installed is not None else _truth_cached(key)
 
 
 @lru_cache(maxsize=8)
@@ -50,4 +84,4 @@ def _navigation_cached(key: str, resolution_m: float) -> Map:
     from tanbench.terrain.derive import derive_navigation_map
 
     spec = TerrainSpec(**json.loads(key))
-    return derive_navigation_map(_truth_cached(key), resolution_m, spec.map_error_m, spec.seed)
+    return derive_navigation_map(_truth(key), resolution_m, spec.map_error_m, spec.seed)
