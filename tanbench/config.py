@@ -68,7 +68,9 @@ class TerrainSpec(_Strict):
     map_error_m: float = Field(0.4, ge=0, description="std of the navigation map's node errors")
     path: str | list[str] | None = Field(
         None, description="bathymetry file(s) or a glob of tiles, relative to the working directory")
-    format: Literal["geotiff", "netcdf", "esri-ascii", "npy", "npz"] | None = None
+    format: str | None = Field(
+        None, description="a registered grid format (geotiff, netcdf, esri-ascii, npy, npz, or a plug-in's); "
+                          "default from the file suffix")
     bounds: tuple[float, float, float, float] | None = Field(
         None, description="(west, east, south, north) of a file without georeferencing")
     origin: tuple[float, float] | None = Field(None, description="(e0, n0) of node [0, 0], metres")

@@ -18,7 +18,12 @@ A new format is one module that defines its reader and registers it::
     register_format("xyz", (".xyz",), read_xyz)
 
 Once the module is imported, files with the suffix (or any file with ``format: xyz`` in
-a sweep's terrain) are read through it. The built-in formats register themselves below.
+a sweep's terrain) are read through it. The built-in formats register themselves below;
+a package adds formats for every tanbench command by naming its modules under the
+``tanbench.formats`` entry-point group (``pyproject.toml``)::
+
+    [project.entry-points."tanbench.formats"]
+    xyz = "mypackage.xyz_format"
 Readers raise :class:`~tanbench.errors.TanbenchError` with one line naming the file and
 the problem.
 """
@@ -163,5 +168,24 @@ def mask_value(z: np.ndarray, value: float) -> np.ndarray:
     return z
 
 
-# The built-in formats register themselves on import (this order is the order of messages).
+ENTRY_POINT_GROUP = "tanbench.formats"
+
+
+def _load_plugin_formats() -> None:
+    """Import every module installed under the ``tanbench.formats`` entry-point group."""
+    from importlib.metadata import entry_points
+
+    for entry in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            entry.load()
+        except Exception as exc:  # noqa: BLE001 - a broken plug-in is one line, not a traceback
+            raise TanbenchError(
+                f"grid format plug-in {entry.name!r} ({entry.value}) does not load: {type(exc).__name__}: {exc}"
+            ) from None
+
+
+# The built-in formats register themselves on import (this order is the order of messages),
+# then those of installed plug-ins.
 from tanbench.terrain.formats import geotiff, netcdf, esri_ascii, npy  # noqa: E402,F401
+
+_load_plugin_formats()
