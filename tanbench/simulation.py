@@ -186,6 +186,12 @@ def check_track_on_map(truth: Truth, tmap) -> None:
             f"the map has no data (a hole) under the track at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, "
             f"{n[k]:.0f}) m; set terrain.fill_holes: true to fill holes")
     clearance = u - floor
+    if clearance.min() < MIN_ALTITUDE_M and np.median(floor) > 0:
+        raise TanbenchError(
+            f"the map looks depth-positive: the seafloor under the track lies above the sea surface "
+            f"(median elevation {np.median(floor):+.1f} m, range {floor.min():+.1f}..{floor.max():+.1f} m); "
+            f"tanbench reads elevations (up positive, the seafloor negative): if the grid stores depths, "
+            f"set terrain.positive: down to negate it")
     if clearance.min() < MIN_ALTITUDE_M:
         k = int(np.argmin(clearance))
         raise TanbenchError(

@@ -160,6 +160,77 @@ CASES = [
 ]
 
 
+# ---- map readers (issue 16): depth-positive grids, NetCDF grids without coordinates ----------
+
+
+def _seafloor_1km() -> np.ndarray:
+    """A 1 km x 1 km seafloor at MAP_RES nodes, row 0 south, elevations -66..-54 m."""
+    e = np.arange(0.0, 1000.0 + 1e-9, MAP_RES)
+    ee, nn = np.meshgrid(e, e)
+    return -60.0 + 5.0 * np.sin(ee / 50.0) * np.cos(nn / 70.0)
+
+
+def depth_positive_geotiff(tmp):
+    """An untagged GeoTIFF of depths (positive down), placed by the sweep's origin/resolution."""
+    import tifffile
+
+    tifffile.imwrite(tmp / "depths.tif", (-_seafloor_1km()).astype(np.float32))
+    return {"depths": tmp / "depths.tif"}
+
+
+def netcdf_without_coordinates(tmp):
+    """A NetCDF grid with only its z variable: no x/y or lon/lat coordinate vectors."""
+    from scipy.io import netcdf_file
+
+    z = _seafloor_1km()
+    with netcdf_file(tmp / "bare.nc", "w") as nc:
+        nc.createDimension("rows", z.shape[0])
+        nc.createDimension("cols", z.shape[1])
+        nc.createVariable("z", "f8", ("rows", "cols"))[:] = z
+    return {"bare_nc": tmp / "bare.nc"}
+
+
+def no_georeferencing_arguments(data: dict) -> dict:
+    for key in ("origin", "resolution"):
+        data["scenario"]["terrain"].pop(key)
+    return data
+
+
+READER_CASES = [
+    case("depth-positive-geotiff", ["validate", "{sweep}"], file_sweep("{depths}"),
+         "bad.yaml: cell", "the map looks depth-positive",
+         "(median elevation +58.1 m, range +57.9..+59.4 m)", "set terrain.positive: down",
+         setup=depth_positive_geotiff),
+    case("netcdf-without-coordinates-or-override", ["validate", "{sweep}"],
+         no_georeferencing_arguments(file_sweep("{bare_nc}")),
+         "bare.nc: the file has no usable georeferencing (no coordinate variables",
+         "origin=(e0, n0) with resolution=", setup=netcdf_without_coordinates),
+]
+CASES += READER_CASES
+
+
+@pytest.mark.parametrize("setup, changes", [
+    (depth_positive_geotiff, {"scenario__terrain__positive": "down"}),
+    (netcdf_without_coordinates, {}),
+], ids=["depth-positive-negated", "netcdf-origin-resolution"])
+def test_reader_inputs_accepted_as_documented(tmp_path, setup, changes):
+    """The same maps with the documented option validate, and read as the seafloor they hold."""
+    from tanbench.runner.sweep import load_sweep
+    from tanbench.terrain import truth_map
+
+    path = next(iter(setup(tmp_path).values()))
+    data = file_sweep(str(path), **changes)
+    (tmp_path / "ok.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    proc = cli("validate", tmp_path / "ok.yaml")
+    assert proc.returncode == 0 and "ok (1 cell(s)" in proc.stdout, proc.stderr
+    grid = truth_map(load_sweep(tmp_path / "ok.yaml").cells[0].scenario.terrain)
+    np.testing.assert_allclose(grid.z, _seafloor_1km(), atol=1e-5)  # float32 in the GeoTIFF
+    assert (grid.e0, grid.n0, grid.res_e, grid.res_n) == (0.0, 0.0, MAP_RES, MAP_RES)
+
+
+# ---- end of the map-reader block ---------------------------------------------------------------
+
+
 @pytest.fixture(scope="module")
 def maps(tmp_path_factory):
     """A 1 km x 1 km .npy map (5 m nodes), the same with a hole under the survey, and broken files."""

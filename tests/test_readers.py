@@ -286,6 +286,25 @@ def test_garbage_netcdf(tmp_path):
     raises_naming(path, read_grid, path, match="not a NetCDF file")
 
 
+def test_netcdf_without_coordinates_takes_origin_and_resolution(tmp_path):
+    """No coordinate variables: the grid as stored, placed by origin/resolution (or bounds and rows)."""
+    path = tmp_path / "bare.nc"
+    with netcdf_file(path, "w") as nc:
+        nc.createDimension("rows", NY)
+        nc.createDimension("cols", NX)
+        nc.createVariable("z", "f8", ("rows", "cols"))[:] = Z
+    raises_naming(path, read_grid, path, match="no usable georeferencing (no coordinate variables")
+    m = read_grid(path, origin=(E0, N0), resolution=(RE, RN))
+    assert_plane(m)
+    assert m.meta["georef"] == "arguments" and m.meta["rows"] == "south_to_north"
+    assert_plane(read_grid(path, bounds=BOUNDS, rows="south_to_north"))
+    with netcdf_file(path, "w") as nc:  # stored north first, as a GMT grid without coordinates might be
+        nc.createDimension("rows", NY)
+        nc.createDimension("cols", NX)
+        nc.createVariable("z", "f8", ("rows", "cols"))[:] = Z[::-1]
+    assert_plane(read_grid(path, origin=(E0, N[-1]), resolution=(RE, RN), rows="north_to_south"))
+
+
 # --------------------------------------------------------------------------- ESRI ASCII
 
 

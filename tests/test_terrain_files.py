@@ -103,6 +103,7 @@ def test_workers_run_a_sweep_on_a_format_they_never_imported(tmp_path, toy_forma
     assert runs["status"].tolist() == ["ok"] and np.isfinite(runs["final_horizontal_error_m"]).all()
 
 
+@pytest.mark.slow
 def test_an_installed_format_plug_in_works_in_the_cli(tmp_path, grid):
     """A module named under the `tanbench.formats` entry points is all `tanbench run` needs."""
     plugins = tmp_path / "site"

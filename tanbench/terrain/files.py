@@ -178,7 +178,8 @@ def load_file_terrain(spec) -> Map:
     """The truth seafloor read from ``spec.path`` (see :class:`tanbench.config.TerrainSpec`).
 
     One named file is read as it is; several files, or a glob, as tiles of one mosaic.
-    The readers refuse a grid without any valid node.
+    The readers refuse a grid without any valid node. A grid of depths (``positive:
+    down``) is negated into elevations.
     """
     paths = resolve_paths(spec.path)
     options = dict(bounds=spec.bounds, origin=spec.origin, resolution=spec.resolution, rows=spec.rows,
@@ -187,6 +188,8 @@ def load_file_terrain(spec) -> Map:
         grid = read_grid(paths[0], spec.format, **options)
     else:
         grid, _ = read_tiles(paths, spec.format, **options)
+    if spec.positive == "down":
+        grid = replace(grid, z=-grid.z)
     if spec.fill_holes:
         grid = fill_holes(grid)
     name = f"file:{paths[0].name}" + (f"+{len(paths) - 1}" if len(paths) > 1 else "")

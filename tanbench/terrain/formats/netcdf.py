@@ -84,22 +84,24 @@ def _netcdf_raw(path: Path, variables: dict) -> RawGrid:
         return None
 
     xname, yname = pick(_NC_X), pick(_NC_Y)
-    if xname is None or yname is None:
-        raise TanbenchError(
-            f"{path}: no coordinate variables x/y, lon/lat or longitude/latitude "
-            f"(variables: {', '.join(variables) or 'none'})"
-        )
     zname = pick(_NC_Z)
     if zname is None:
         two_d = [name for name, (data, _, _) in variables.items() if data.ndim == 2]
         if len(two_d) != 1:
             raise TanbenchError(
-                f"{path}: no elevation variable z or elevation (variables: {', '.join(variables)})"
+                f"{path}: no elevation variable z or elevation (variables: {', '.join(variables) or 'none'})"
             )
         zname = two_d[0]
+    zdata, z_attrs, z_dims = variables[zname]
+    if xname is None or yname is None:
+        # no coordinate vectors: the grid as stored (row 0 first), placed by the georeferencing
+        # arguments (origin and resolution, or bounds and rows) as a bare array is
+        if zdata.ndim != 2:
+            raise TanbenchError(f"{path}: {zname} has shape {zdata.shape}; expected a 2-D grid")
+        return RawGrid(_unpack(zdata, z_attrs, path, zname), problem=(
+            f"no coordinate variables x/y, lon/lat or longitude/latitude; variables: {', '.join(variables)}"))
     x, x_attrs, _ = variables[xname]
     y, y_attrs, _ = variables[yname]
-    zdata, z_attrs, z_dims = variables[zname]
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     if x.ndim != 1 or y.ndim != 1 or zdata.ndim != 2:
