@@ -2,8 +2,9 @@
 
 Gravity follows Zhou et al. 2017, Eqs. 9-13; the radii are the WGS84 meridian (R_N)
 and transverse (R_E) radii of curvature. Used by the IMU simulation (what the
-sensors feel), by the navigation system (what it compensates) and by the map
-readers (local metric projection of geographic grids).
+sensors feel), by the navigation system (what it compensates) and by the
+georeferencing of map files (``terrain/georef.py``: local metric projection of
+geographic grids).
 """
 
 from __future__ import annotations

@@ -7,7 +7,6 @@ map is given by a relative path must give exactly the runs of local `--workers 2
 
 from __future__ import annotations
 
-import copy
 import json
 import os
 import signal
@@ -24,6 +23,7 @@ import yaml
 from sweep_support import ROOT, assert_same_runs, cli, write_sweep
 
 pytest.importorskip("distributed")
+pytestmark = pytest.mark.slow  # each test starts CLI runs and workers: 15-70 s on 2 busy cores
 
 DASK = Path(sys.executable).with_name("dask")
 MONTEREY_CONFIG = ROOT / "configs" / "monterey.yaml"
@@ -104,7 +104,13 @@ def cluster(tmp_path_factory):
             client.wait_for_workers(2, timeout=START_TIMEOUT_S)
             cwds = client.run(os.getcwd)
         assert set(cwds.values()) == {str(home)}
-        yield address
+
+        def add_worker(name):
+            start(name, "worker", address, "--host", "127.0.0.1", "--nthreads", "1", "--no-dashboard",
+                  "--name", name, "--local-directory", str(home / name))
+            return procs[-1]
+
+        yield address, add_worker
     finally:
         _stop(procs)
 
@@ -131,20 +137,47 @@ def test_relative_map_path_on_a_cluster_matches_local_workers(cluster, tmp_path)
     np.save(project / "maps" / "seafloor.npy",
             -70.0 + 6.0 * np.sin(ee / 45.0) * np.cos(nn / 65.0) + 2.5 * np.cos(ee / 19.0 + nn / 37.0))
     sweep = write_sweep(project / "sweep.yaml", MAP_SWEEP)
-    local, dask = _run_both_ways(sweep.name, tmp_path, cluster, cwd=project)
+    local, dask = _run_both_ways(sweep.name, tmp_path, cluster[0], cwd=project)
     assert len(local) == 2 * 2 * 2 and (local["status"] == "ok").all(), local["error"].unique()
     assert_same_runs(local, dask)
 
 
-@pytest.mark.slow
 @pytest.mark.skipif(not MONTEREY_TILES.is_dir(), reason="the Monterey tiles (../shared/data/monterey) are not here")
 def test_monterey_on_a_cluster_matches_local_workers(cluster, tmp_path):
     """configs/monterey.yaml (shortened: 2 runs, 300 particles, 120 s) on the cluster and locally."""
     data = yaml.safe_load(MONTEREY_CONFIG.read_text())
-    data = copy.deepcopy(data)
     data["runs"] = 2
     data["scenario"].update(particles=300, duration_s=120)
     sweep = write_sweep(tmp_path / "monterey-short.yaml", data)
-    local, dask = _run_both_ways(sweep, tmp_path, cluster, cwd=ROOT)
+    local, dask = _run_both_ways(sweep, tmp_path, cluster[0], cwd=ROOT)
     assert len(local) == 2 * 2 * 3 and (local["status"] == "ok").all(), local["error"].unique()
     assert_same_runs(local, dask)
+
+
+def test_a_worker_joining_later_gets_the_maps_and_they_go_with_the_sweep(cluster, tmp_path):
+    """The maps reach a worker started after the executor opened; closing it removes them everywhere."""
+    from distributed import Client
+
+    from tanbench.config import TerrainSpec
+    from tanbench.runner.executors import open_executor
+    from tanbench.terrain import _key, file_truth_maps
+
+    def installed_terrain_keys() -> list[str]:  # defined here: the workers cannot import this module
+        from tanbench.terrain import _INSTALLED
+
+        return sorted(_INSTALLED)
+
+    address, add_worker = cluster
+    np.save(tmp_path / "flat.npy", np.full((20, 30), -40.0))
+    spec = TerrainSpec(kind="file", path=str(tmp_path / "flat.npy"), origin=(0, 0), resolution=5.0)
+    maps = file_truth_maps([spec])
+    with Client(address, timeout="30s") as client:
+        with open_executor(1, address, maps):
+            late = add_worker("late")
+            client.wait_for_workers(3, timeout=START_TIMEOUT_S)
+            seen = client.run(installed_terrain_keys)
+            assert len(seen) == 3 and all(keys == [_key(spec)] for keys in seen.values()), seen
+        assert all(keys == [] for keys in client.run(installed_terrain_keys).values())
+        client.retire_workers([w for w, info in client.scheduler_info()["workers"].items()
+                               if info.get("name") == "late"], close_workers=True)
+    late.wait(timeout=60)
