@@ -79,7 +79,7 @@ class TerrainSpec(_Strict):
     crs: Literal["metric", "projected", "epsg4326", "geographic", "epsg3857"] | None = Field(
         None, description="grid coordinates: metres, lon/lat degrees or Web Mercator; default from the file")
     nodata: float | None = None
-    positive: Literal["up", "down"] = Field(
+    positive: Literal["up", "down"] = new_option(
         "up", description="what the file's values measure: up = elevation (seafloor negative), down = depth (negated)")
     fill_holes: bool = Field(False, description="fill no-data holes instead of rejecting the map")
 
