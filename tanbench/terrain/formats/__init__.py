@@ -44,7 +44,10 @@ class RawGrid:
     """An array as stored, with the file's georeferencing where it has some.
 
     Stored node ``[i, j]`` sits at ``(x0 + j * dx, y0 + i * dy)``; a negative ``dy``
-    means row 0 is the northern edge. ``crs`` is None when the file does not say.
+    means row 0 is the northern edge. ``crs`` (``"metric"``, ``"epsg4326"``,
+    ``"epsg3857"``) is None when the file does not say. ``georef`` names where the
+    georeferencing came from (``"tags"``, ``"coordinates"``, ``"header"``, ``"keys"``;
+    ``"none"``), ``problem`` why the file's own is unusable, if it is.
     """
 
     z: np.ndarray
@@ -139,10 +142,11 @@ def read_raw(path: Path, name: str | None = None) -> tuple[str, RawGrid]:
     return fmt.name, fmt.read(path)
 
 
-# Values: helpers every reader uses
+# ---- values: what every reader does to what it read ---------------------------------------
 
 
 def as_float(z: np.ndarray, path: Path) -> np.ndarray:
+    """Numeric grid values as float64, non-finite values as NaN."""
     if z.dtype.kind not in "iuf":
         raise TanbenchError(f"{path}: grid values have type {z.dtype}; expected numbers")
     out = z.astype(np.float64)
@@ -151,6 +155,7 @@ def as_float(z: np.ndarray, path: Path) -> np.ndarray:
 
 
 def as_2d(z, path: Path) -> np.ndarray:
+    """A 2-D array's values as :func:`as_float` gives them; another shape is an error."""
     z = np.asarray(z)
     if z.ndim != 2:
         raise TanbenchError(f"{path}: array has shape {z.shape}; expected a 2-D grid")
