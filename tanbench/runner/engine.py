@@ -3,7 +3,8 @@
 The parent process owns the results directory: workers return their rows and series,
 the parent writes one file per finished task (atomically), so killing a sweep at any
 moment loses at most the tasks in flight, and re-running the same command resumes:
-tasks whose every row is stored with status "ok" are skipped (``--force`` recomputes).
+tasks whose every row is stored with status "ok" are skipped (``--force`` recomputes the
+sweep's tasks and keeps stored runs outside its range).
 When every task is done, the series summary and the tables are rebuilt from what is
 stored for the sweep's current cells.
 """
@@ -132,10 +133,22 @@ def check_not_stale(sweep: Sweep, out: Path, force: bool) -> None:
             f"--force to recompute those cells, or use another --out")
 
 
+def stale_cells(sweep: Sweep, out: Path) -> list[str]:
+    """This sweep's cells with stored runs (any run index) made with other seeds than it would use."""
+    if not store.run_files(out):
+        return []
+    rows = store.stored_rows(out, {c.cell_id for c in sweep.cells})
+    if rows.empty:
+        return []
+    wide = sweep.with_runs(max(sweep.spec.runs, int(rows["run"].max()) + 1))
+    stale = store.stale_rows(out, expected_seeds(build_tasks(wide, keep_series=False)))
+    return sorted(set(stale["cell_id"])) if len(stale) else []
+
+
 def validate_worlds(sweep: Sweep) -> None:
     """Check every cell against its terrain: maps, track, sonar and initial uncertainty."""
     from tanbench.methods.api import check_start_on_map
-    from tanbench.simulation import noise_free_world
+    from tanbench.simulation import motion_plan, noise_free_world
     from tanbench.terrain import navigation_map
 
     seen = set()
@@ -144,6 +157,10 @@ def validate_worlds(sweep: Sweep) -> None:
         varied = ', '.join(f'{k}={v}' for k, v in cell.varied.items()) or 'defaults'
         label = f"{sweep.path or sweep.name}: cell {cell.cell_id} ({varied})"
         try:
+            length = motion_plan(sc).duration
+            if sc.sampling_time_s > length + 1e-9:
+                raise ValueError(f"sampling_time_s ({sc.sampling_time_s:g} s) is longer than the run "
+                                 f"({length:g} s): the filter would not update after the start")
             world = json.dumps(sc.world_spec(), sort_keys=True)
             if world not in seen:
                 noise_free_world(world)
@@ -156,12 +173,13 @@ def validate_worlds(sweep: Sweep) -> None:
             raise TanbenchError(f"{label}: {exc}") from None
 
 
-def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str = "summary") -> Plan:
-    """The tasks of ``sweep`` and which of them ``out`` already holds."""
+def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str = "summary",
+              force: bool = False) -> Plan:
+    """The tasks of ``sweep`` and which of them ``out`` already holds (none with ``force``)."""
     if series not in SERIES_MODES:
         raise TanbenchError(f"--series must be one of {', '.join(SERIES_MODES)}")
     tasks = build_tasks(sweep, keep_series=series != "none")
-    done = store.completed_tasks(out, expected_seeds(tasks)) if (out / "runs").is_dir() else set()
+    done = store.completed_tasks(out, expected_seeds(tasks)) if (out / "runs").is_dir() and not force else set()
     return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers())
 
 
@@ -180,6 +198,8 @@ def store_result(result: TaskResult, plan: Plan, columns: dict, meta: dict, full
         frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in result.series.items()]
         store.write_parquet(pd.concat(frames, ignore_index=True),
                             store.series_file(out, result.cell_id, result.run, full_series), meta)
+    # a recomputed run (--force) leaves no older series of itself under the other --series mode
+    store.series_file(out, result.cell_id, result.run, not full_series).unlink(missing_ok=True)
     rows = [{"sweep": plan.sweep.name, **columns[result.cell_id],
              **{k: v for k, v in row.items() if k != "cell_id"}} for row in result.rows]
     store.write_table(rows_table(rows), store.run_file(out, result.cell_id, result.run), meta)
@@ -197,9 +217,17 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     validate_worlds(sweep)
     check_directory_owner(sweep, out, add)
     check_not_stale(sweep, out, force)
+    # --force recomputes the tasks of this sweep (runs 0..runs-1 of its cells) and nothing
+    # else: each new result replaces its stored run when the cell is merged, and runs
+    # outside the range (e.g. runs 1-2 after `--runs 1 --force` on a 3-run sweep) are kept,
+    # unless they were made with other seeds: then the cell's stored runs are deleted, and said
     if force:
-        store.remove_cells(out, [c.cell_id for c in sweep.cells])
-    plan = make_plan(sweep, out, workers, series)
+        stale = stale_cells(sweep, out)
+        if stale:
+            echo(f"--force: deleting every stored run of {len(stale)} cell(s) whose runs were made with other "
+                 f"seeds: {', '.join(stale)}")
+            store.remove_cells(out, stale)
+    plan = make_plan(sweep, out, workers, series, force=force)
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
     store.write_text(sweep.text, out / "sweep.yaml")
     todo = plan.todo
