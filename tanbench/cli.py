@@ -117,7 +117,7 @@ def plan(
     runs: Optional[int] = typer.Option(None, "--runs", min=1,
                                        help="Override the sweep's runs per cell [default: the sweep's runs]."),
 ):
-    from tanbench.runner.engine import make_plan, task_cost
+    from tanbench.runner.engine import current_load, default_workers, make_plan, numba_cache_is_warm, task_cost
     from tanbench.runner.sweep import load_sweep
 
     sweep = load_sweep(sweep_file)
@@ -136,8 +136,12 @@ def plan(
         typer.echo(f"  {cell.cell_id}  [{', '.join(cell.tables)}]  {varied}: {done}/{sweep.spec.runs} done, "
                    f"~{cost:.0f} core-s")
     todo = p.todo
-    typer.echo(f"to do: {len(todo)} task(s) ({len(todo) * n_m} runs), about {p.estimate_seconds():.0f} s "
-               f"on {p.workers} worker(s) (estimate; `tanbench bench` measures this machine); results in {out}")
+    parts = p.estimate_parts()
+    start = (f"{parts['compile']:.0f} s compiling the numba kernels (cold cache) and starting workers"
+             if not numba_cache_is_warm() else f"{parts['compile']:.0f} s starting workers (kernels cached)")
+    typer.echo(f"to do: {_count(len(todo), n_m)}, about {sum(parts.values()):.0f} s on {min(p.workers, max(1, len(todo)))} "
+               f"worker(s) ({start}, {parts['tasks']:.0f} s running, {parts['fixed']:.0f} s around; "
+               f"load average {current_load():.1f} on {default_workers()} core(s)); results in {out}")
 
 
 @app.command(help="Validate a sweep file (keys, types, values, terrain, track, initial uncertainty)."

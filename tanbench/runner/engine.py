@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, wait
@@ -31,7 +32,14 @@ from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.schema import rows_table
 
 SERIES_MODES = ("none", "summary", "full")
-SIMULATION_S = 0.1
+# Time model of `tanbench plan` (calibration: docs/results.md, "How long a sweep takes").
+# Costs on one uncontended core of the 2-core development machine; the estimate divides
+# them by the share of a core each process gets at the current load average.
+# (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
+SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
+COMPILE_S = 12.0  # numba compiling every kernel (cold on-disk cache), one process
+WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
+FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
 
 
 @dataclass
@@ -49,9 +57,27 @@ class Plan:
         return [t for t in self.tasks if t.key not in self.done]
 
     def estimate_seconds(self, tasks=None) -> float:
+        """Wall seconds of running ``tasks`` (default: what is left to do), compilation included."""
+        return sum(self.estimate_parts(tasks).values())
+
+    def estimate_parts(self, tasks=None, load: float | None = None, warm: bool | None = None) -> dict[str, float]:
+        """The estimate in parts: ``compile`` (or loading the cached kernels), ``tasks`` and ``fixed``.
+
+        ``load`` is the machine's load average before the sweep starts (default: now) and
+        ``warm`` whether numba's on-disk cache holds the kernels (default: looked up).
+        """
         tasks = self.todo if tasks is None else tasks
-        total = sum(task_cost(t) for t in tasks)
-        return total / max(1, min(self.workers, max(1, len(tasks))))
+        if not tasks:
+            return {"compile": 0.0, "tasks": 0.0, "fixed": 0.0}
+        load = current_load() if load is None else load
+        warm = numba_cache_is_warm() if warm is None else warm
+        workers = max(1, min(self.workers, len(tasks)))
+        cores = default_workers()
+        share_one = min(1.0, cores / (load + 1))  # the parent alone (compiling)
+        share_all = min(1.0, cores / (load + workers))  # every worker busy
+        start = (0.0 if warm else COMPILE_S / share_one) + WARM_START_S / share_all
+        return {"compile": start, "tasks": sum(task_cost(t) for t in tasks) / (workers * share_all),
+                "fixed": FIXED_S / share_one}
 
 
 @dataclass
@@ -77,6 +103,43 @@ def task_cost(task: Task) -> float:
 @lru_cache(maxsize=256)
 def _scenario_of(scenario_json: str) -> Scenario:
     return Scenario(**json.loads(scenario_json))
+
+
+def current_load() -> float:
+    """The 1-minute load average (runnable processes), 0 where the system does not report it."""
+    try:
+        return os.getloadavg()[0]
+    except (OSError, AttributeError):
+        return 0.0
+
+
+def numba_cache_is_warm() -> bool:
+    """Whether numba's on-disk cache holds this tanbench's kernels.
+
+    Warm when the filters' module has cache index files (``__pycache__/<module>.*.nbi``)
+    and no module's index is older than its source (numba rejects such an index and
+    compiles again). Modules whose kernels are only called from other kernels have no
+    index of their own and are not looked at (numba does not track them either).
+    """
+    cache_dir = os.environ.get("NUMBA_CACHE_DIR")
+    newest = {}
+    for source in jit_modules():
+        indexes = list((source.parent / "__pycache__").glob(f"{source.stem}.*.nbi"))
+        if cache_dir:
+            indexes += list(Path(cache_dir).rglob(f"{source.stem}.*.nbi"))
+        if indexes:
+            newest[source] = max(p.stat().st_mtime for p in indexes)
+            if newest[source] < source.stat().st_mtime:
+                return False
+    return any(source.name == "tight.py" for source in newest)
+
+
+@lru_cache(maxsize=1)
+def jit_modules() -> tuple[Path, ...]:
+    """The tanbench source files that define cached numba kernels."""
+    package = Path(__file__).resolve().parents[1]
+    return tuple(p for p in sorted(package.rglob("*.py"))
+                 if re.search(r"njit\(\s*cache\s*=\s*True", p.read_text(errors="ignore")))
 
 
 def default_workers() -> int:
@@ -268,9 +331,23 @@ def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progres
 
     from tanbench.runner.executors import open_executor
 
+    from tanbench.runner.executors import warm_up
+
     columns = cell_columns(plan.sweep)
     n_methods = len(plan.sweep.spec.methods)
     workers = min(plan.workers, len(todo)) if scheduler is None else plan.workers
+    if scheduler in (None, "local-dask") and not numba_cache_is_warm():
+        # compile once here, into numba's on-disk cache, so the workers only load it (a
+        # progress bar at 0 % for a minute would look like a hang)
+        guess = plan.estimate_parts(todo, warm=False)["compile"]
+        if progress:
+            print(f"compiling the numba kernels (once per install or code change; about {guess:.0f} s on this "
+                  f"machine now)...", file=sys.stderr, flush=True)
+        started = time.perf_counter()
+        warm_up()
+        if progress:
+            print(f"compiled in {time.perf_counter() - started:.0f} s; starting {workers} worker(s)",
+                  file=sys.stderr, flush=True)
     # the executor first: if it cannot start (a Dask address that does not answer), the
     # user sees its one error line and no half-drawn progress bar
     with open_executor(workers, scheduler) as handle:
