@@ -214,7 +214,7 @@ def tables(
         typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
 
 
-@app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet."
+@app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet or CSV."
              + EXAMPLE.format("tanbench simulate --area A --seed 1 --out run.parquet"))
 def simulate(
     area: str = typer.Option("A", "--area", help="A, B or vehicle."),

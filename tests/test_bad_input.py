@@ -434,3 +434,19 @@ def test_usage_errors_are_one_line_too(tmp_path, maps):
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
     assert "--workers" in lines[0]
     assert not os.path.exists(tmp_path / "results")
+
+
+@pytest.mark.parametrize("data", [
+    sweep(scenario__noise_m=float("inf")),
+    sweep(scenario__duration_s=0.001),
+    sweep(scenario__duration_s=None, scenario__sampling_time_s=100000, scenario__map_resolution_m=20),
+    file_sweep(scenario__filter__initial_area_m=2000),
+], ids=["noise-inf", "duration-0.001", "sampling-longer-than-the-run", "initial-uncertainty-off-the-map"])
+def test_validate_refuses_what_run_refuses(tmp_path, maps, data):
+    """`validate` and `run` give the same one error line (run before any task, storing nothing)."""
+    argv = prepare(tmp_path, maps, ["validate", "{sweep}"], data, None)
+    checked = cli(*argv)
+    ran = cli("run", argv[1], "--out", tmp_path / "out", "--workers", 1, "-q")
+    assert checked.returncode == ran.returncode == 2, (checked.stderr, ran.stderr)
+    assert error_lines(checked.stderr) == error_lines(ran.stderr) and len(error_lines(ran.stderr)) == 1
+    assert not list((tmp_path / "out").rglob("*.parquet"))
