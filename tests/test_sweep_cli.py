@@ -148,7 +148,7 @@ def test_plan_shows_cells_progress_and_estimate(base, tmp_path):
     before = cli("plan", sweep, "--out", tmp_path / "fresh", "--workers", 2)
     assert before.returncode == 0, before.stderr
     assert before.stdout.count(f"0/{RUNS} done") == N_CELLS
-    assert re.search(rf"to do: {N_TASKS} task\(s\) \({N_TASKS * 3} runs\), about \d+ s on 2 worker", before.stdout)
+    assert re.search(rf"to do: {N_TASKS} tasks \({N_TASKS * 3} runs\), about \d+ s on 2 worker", before.stdout)
     after = cli("plan", sweep, "--out", out)
     assert after.stdout.count(f"{RUNS}/{RUNS} done") == N_CELLS
     assert "to do: 0 tasks (0 runs)" in after.stdout
