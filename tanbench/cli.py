@@ -136,6 +136,9 @@ def plan(
         typer.echo(f"  {cell.cell_id}  [{', '.join(cell.tables)}]  {varied}: {done}/{sweep.spec.runs} done, "
                    f"~{cost:.0f} core-s")
     todo = p.todo
+    if not todo:
+        typer.echo(f"to do: nothing, every task is stored in {out} ({_count(0, n_m)} left)")
+        return
     parts = p.estimate_parts()
     start = (f"{parts['compile']:.0f} s compiling the numba kernels (cold cache) and starting workers"
              if not numba_cache_is_warm() else f"{parts['compile']:.0f} s starting workers (kernels cached)")
