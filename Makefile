@@ -20,6 +20,7 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 ## run: the default sweep (configs/quick.yaml) on the built-in synthetic terrain; prints its tables
 run: $(VENV)/.installed-run
 	$(TB) run configs/quick.yaml
+	@echo "tanbench is installed in $(VENV): 'source $(VENV)/bin/activate' puts it on PATH (or type $(TB))"
 
 ## test: the test suite, then the CI regression sweep checked against the committed baseline
 test: $(VENV)/.installed-test

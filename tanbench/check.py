@@ -15,12 +15,17 @@ time-averaged horizontal error):
 
 A row is "regressed" if its corrected worse-p is below alpha, "improved" if its
 corrected better-p is, "unchanged" otherwise.
+
+Missing data is a failure too: a cell, a method of a matched cell, or a (successful) run
+of a matched cell and method found in only one of the directories is listed in
+``missing`` and makes ``tanbench check`` exit 1 (``--allow-missing`` compares what the
+two share and only reports the rest).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -46,12 +51,21 @@ class CheckOptions:
 @dataclass
 class CheckResult:
     table: pd.DataFrame  # one row per (cell, method, metric)
-    only_new: list[str]
+    only_new: list[str]  # cells
     only_baseline: list[str]
+    missing_methods: list[str] = field(default_factory=list)  # "<cell>: method m only in NEW"
+    missing_runs: list[str] = field(default_factory=list)  # "<cell>, m: runs 3, 4 only in BASELINE"
 
     @property
     def regressed(self) -> bool:
         return bool((self.table["verdict"] == "regressed").any())
+
+    @property
+    def missing(self) -> list[str]:
+        """Everything found in only one directory, one line each."""
+        return ([f"cell only in NEW: {c}" for c in self.only_new]
+                + [f"cell only in BASELINE: {c}" for c in self.only_baseline]
+                + self.missing_methods + self.missing_runs)
 
 
 def holm(p: np.ndarray) -> np.ndarray:
@@ -136,12 +150,19 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResu
         return [f"{firsts.loc[k, 'cell_id']} ({_label(firsts.loc[k])})" for k in sorted(keys)]
 
     rng = np.random.default_rng(opt.seed)
-    rows = []
+    rows, missing_methods, missing_runs = [], [], []
     for key in sorted(cells_new & cells_base):
         n_cell, b_cell = new[new["_cell"] == key], base[base["_cell"] == key]
-        for method in sorted(set(n_cell["method"]) & set(b_cell["method"])):
+        cell = f"{n_cell['cell_id'].iloc[0]} ({_label(n_cell.iloc[0])})"
+        methods_new, methods_base = set(n_cell["method"]), set(b_cell["method"])
+        missing_methods += [f"method {m} only in NEW: cell {cell}" for m in sorted(methods_new - methods_base)]
+        missing_methods += [f"method {m} only in BASELINE: cell {cell}" for m in sorted(methods_base - methods_new)]
+        for method in sorted(methods_new & methods_base):
             nm = n_cell[n_cell["method"] == method].set_index("run").sort_index()
             bm = b_cell[b_cell["method"] == method].set_index("run").sort_index()
+            for side, extra in (("NEW", nm.index.difference(bm.index)), ("BASELINE", bm.index.difference(nm.index))):
+                if len(extra):
+                    missing_runs.append(f"{_runs_text(extra)} of {method} only in {side} (ok runs): cell {cell}")
             common = nm.index.intersection(bm.index)
             paired = len(common) >= 5 and bool((nm.loc[common, "seed"] == bm.loc[common, "seed"]).all())
             for metric, column in METRICS.items():
@@ -167,7 +188,15 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResu
     table["verdict"] = np.where(table["p_worse_holm"] < opt.alpha, "regressed",
                                 np.where(table["p_better_holm"] < opt.alpha, "improved", "unchanged"))
     return CheckResult(table=table, only_new=describe(cells_new - cells_base, new),
-                       only_baseline=describe(cells_base - cells_new, base))
+                       only_baseline=describe(cells_base - cells_new, base),
+                       missing_methods=missing_methods, missing_runs=missing_runs)
+
+
+def _runs_text(runs) -> str:
+    """'run 3' or 'runs 0, 1, 4' (at most 10 listed)."""
+    runs = [int(r) for r in runs]
+    shown = ", ".join(str(r) for r in runs[:10]) + (f", ... ({len(runs)} in all)" if len(runs) > 10 else "")
+    return f"run{'s' if len(runs) > 1 else ''} {shown}"
 
 
 def render(result: CheckResult) -> str:
@@ -180,13 +209,12 @@ def render(result: CheckResult) -> str:
                      f"{r['new_mean_m']:9.2f} {r['change_m']:+8.2f} [{r['ci95_low_m']:+7.2f},{r['ci95_high_m']:+7.2f}] "
                      f"{r['margin_m']:7.2f} {r['p_worse_holm']:9.2g} {r['p_better_holm']:9.2g}  {r['cell']}"
                      f"{'' if r['paired'] else ' (unpaired)'}")
-    for label in result.only_new:
-        lines.append(f"only in NEW:      {label}")
-    for label in result.only_baseline:
-        lines.append(f"only in BASELINE: {label}")
+    for line in result.missing:
+        lines.append(f"missing: {line}")
     counts = t["verdict"].value_counts()
     lines.append(f"{counts.get('regressed', 0)} regressed, {counts.get('improved', 0)} improved, "
-                 f"{counts.get('unchanged', 0)} unchanged (Holm-corrected p-values)")
+                 f"{counts.get('unchanged', 0)} unchanged (Holm-corrected p-values); "
+                 f"{len(result.missing)} missing (cells, methods or runs in only one directory)")
     return "\n".join(lines)
 
 
@@ -200,12 +228,12 @@ def write_report(result: CheckResult, path: Path) -> None:
         if suffix == ".parquet":
             result.table.to_parquet(path, index=False)
         elif suffix == ".md":
-            extra = "".join(f"\n* only in NEW: {c}" for c in result.only_new) + "".join(
-                f"\n* only in BASELINE: {c}" for c in result.only_baseline)
+            extra = "".join(f"\n* missing: {line}" for line in result.missing)
             path.write_text(to_markdown(result.table, title="tanbench check") + extra + "\n")
         elif suffix == ".json":
             path.write_text(json.dumps({"rows": json.loads(result.table.to_json(orient="records")),
                                         "only_new": result.only_new, "only_baseline": result.only_baseline,
+                                        "missing": result.missing,
                                         "regressed": result.regressed}, indent=1))
         else:
             raise TanbenchError(f"--report {path}: use a .parquet, .md or .json file name")

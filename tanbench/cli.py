@@ -17,9 +17,9 @@ import typer
 from tanbench import __version__
 from tanbench.errors import TanbenchError
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="tanbench: Monte Carlo benchmark for underwater terrain-aided navigation.")
-terrain_app = typer.Typer(no_args_is_help=True, help="Inspect the terrain: along-track depth and roughness.")
+terrain_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Inspect the terrain: along-track depth and roughness.")
 app.add_typer(terrain_app, name="terrain")
 
 EXAMPLE = "\n\nExample: {}"
@@ -43,16 +43,23 @@ def _default_out(sweep) -> Path:
     return Path("results") / sweep.name
 
 
+def _count(tasks: int, n_methods: int) -> str:
+    """'30 tasks (90 runs)': a task is one Monte Carlo run of a cell, with every method (the bar counts runs)."""
+    return (f"{tasks} task{'s' if tasks != 1 else ''} ({tasks * n_methods} run{'s' if tasks * n_methods != 1 else ''})")
+
+
 @app.command(help="Run (or resume) a sweep: every cell x method x Monte Carlo run, into Parquet."
              + EXAMPLE.format("tanbench run configs/quick.yaml --workers 2"))
 def run(
     sweep_file: Path = typer.Argument(..., help="Sweep YAML file."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/<name>]."),
-    workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1, help="Worker processes [default: cores]."),
+    workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1,
+                                          help="Worker processes [default: the cores available]."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler",
                                             help="Dask scheduler address (tcp://host:8786) or 'local-dask'."),
     runs: Optional[int] = typer.Option(None, "--runs", min=1, help="Override the sweep's runs per cell."),
-    force: bool = typer.Option(False, "--force", help="Recompute runs already stored."),
+    force: bool = typer.Option(False, "--force", help="Recompute the sweep's runs 0..runs-1 even if stored; "
+                               "stored runs outside that range are kept."),
     add: bool = typer.Option(False, "--add", help="Add to a results directory that holds another sweep's runs."),
     series: str = typer.Option("summary", "--series", help="Per-update series to keep: none, summary or full."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
@@ -66,8 +73,10 @@ def run(
         sweep = sweep.with_runs(runs)
     out = out or _default_out(sweep)
     # the resume command repeats what selects the tasks and where their series go
-    again = f"tanbench run {sweep_file} --out {out}" + (f" --runs {runs}" if runs is not None else "") + (
-        f" --series {series}" if series != "summary" else "")
+    again = f"tanbench run {sweep_file} --out {out}" + "".join(
+        f" {flag} {value}" for flag, value in (("--workers", workers), ("--scheduler", scheduler), ("--runs", runs))
+        if value is not None) + (f" --series {series}" if series != "summary" else "")
+    n_m = len(sweep.spec.methods)
     try:
         report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force, add=add,
                            progress=not quiet, echo=typer.echo)
@@ -75,10 +84,10 @@ def run(
         typer.echo(f"interrupted; resume with: {again}", err=True)
         raise typer.Exit(130) from None
     if report.interrupted:
-        typer.echo(f"interrupted: {report.finished} task(s) finished in this session are stored in {out}; "
+        typer.echo(f"interrupted: {_count(report.finished, n_m)} finished in this session are stored in {out}; "
                    f"resume with: {again}", err=True)
         raise typer.Exit(130)
-    typer.echo(f"{sweep.name}: {report.finished} task(s) run, {report.skipped} already done, "
+    typer.echo(f"{sweep.name}: {_count(report.finished, n_m)} run, {_count(report.skipped, n_m)} already done, "
                f"{report.wall_s:.1f} s; results in {out}")
     from tanbench.results import load, sweep_tables
 
@@ -103,10 +112,12 @@ def _compact(table):
 def plan(
     sweep_file: Path = typer.Argument(..., help="Sweep YAML file."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/<name>]."),
-    workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1),
-    runs: Optional[int] = typer.Option(None, "--runs", min=1),
+    workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1,
+                                          help="Worker processes to plan for [default: the cores available]."),
+    runs: Optional[int] = typer.Option(None, "--runs", min=1,
+                                       help="Override the sweep's runs per cell [default: the sweep's runs]."),
 ):
-    from tanbench.runner.engine import make_plan, task_cost
+    from tanbench.runner.engine import current_load, default_workers, make_plan, numba_cache_is_warm, task_cost
     from tanbench.runner.sweep import load_sweep
 
     sweep = load_sweep(sweep_file)
@@ -116,7 +127,8 @@ def plan(
     p = make_plan(sweep, out, workers)
     n_m = len(sweep.spec.methods)
     typer.echo(f"sweep {sweep.name}: {len(sweep.cells)} cell(s) x {n_m} method(s) x {sweep.spec.runs} run(s) "
-               f"= {len(sweep.cells) * n_m * sweep.spec.runs} runs in {len(p.tasks)} task(s)")
+               f"= {len(sweep.cells) * n_m * sweep.spec.runs} runs in {len(p.tasks)} task(s) (a task: one run "
+               f"of a cell with every method)")
     for cell in sweep.cells:
         done = sum(1 for t in p.tasks if t.cell_id == cell.cell_id and t.key in p.done)
         varied = ", ".join(f"{k}={v}" for k, v in cell.varied.items()) or "defaults"
@@ -124,8 +136,15 @@ def plan(
         typer.echo(f"  {cell.cell_id}  [{', '.join(cell.tables)}]  {varied}: {done}/{sweep.spec.runs} done, "
                    f"~{cost:.0f} core-s")
     todo = p.todo
-    typer.echo(f"to do: {len(todo)} task(s) ({len(todo) * n_m} runs), about {p.estimate_seconds():.0f} s "
-               f"on {p.workers} worker(s) (estimate; `tanbench bench` measures this machine); results in {out}")
+    if not todo:
+        typer.echo(f"to do: nothing, every task is stored in {out} ({_count(0, n_m)} left)")
+        return
+    parts = p.estimate_parts()
+    start = (f"{parts['compile']:.0f} s compiling the numba kernels (cold cache) and starting workers"
+             if not numba_cache_is_warm() else f"{parts['compile']:.0f} s starting workers (kernels cached)")
+    typer.echo(f"to do: {_count(len(todo), n_m)}, about {sum(parts.values()):.0f} s on {min(p.workers, max(1, len(todo)))} "
+               f"worker(s) ({start}, {parts['tasks']:.0f} s running, {parts['fixed']:.0f} s around; "
+               f"load average {current_load():.1f} on {default_workers()} core(s)); results in {out}")
 
 
 @app.command(help="Validate a sweep file (keys, types, values, terrain, track, initial uncertainty)."
@@ -181,9 +200,13 @@ def tables(
         raise TanbenchError(f"{directory}: no runs of the cells of {directory / 'sweep.yaml'} are stored "
                             f"(run the sweep first)")
     if compare_paper:
-        from tanbench.paper import compare_with_paper
+        from tanbench.paper import PAPER_TABLES, compare_with_paper
 
         result = compare_with_paper(result)
+        if not any("paper_mean_final_error_m" in t or "paper_mean_time_avg_error_m" in t for t in result.values()):
+            typer.echo(f"note: --compare-paper: none of this sweep's tables ({', '.join(result)}) is one of the "
+                       f"paper's ({', '.join(PAPER_TABLES)}, as in configs/zhou2017.yaml); no paper column to show",
+                       err=True)
     if fmt == "csv":
         # one CSV (every table's rows; the `table` column tells them apart), so it parses as one file
         import pandas as pd
@@ -194,23 +217,38 @@ def tables(
         typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
 
 
-@app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet."
+@app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet or CSV."
              + EXAMPLE.format("tanbench simulate --area A --seed 1 --out run.parquet"))
 def simulate(
     area: str = typer.Option("A", "--area", help="A, B or vehicle."),
-    seed: int = typer.Option(1, "--seed", help="Seed of the run's vehicle data."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Parquet file to write."),
-    duration: Optional[float] = typer.Option(None, "--duration", help="Seconds (default: the whole run)."),
+    seed: int = typer.Option(1, "--seed", min=0, help="Seed of the run's vehicle data (0 or more)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="File to write: .parquet or .csv."),
+    duration: Optional[float] = typer.Option(None, "--duration", help="Seconds [default: the whole run]."),
     every: int = typer.Option(1, "--every", min=1, help="Keep every n-th IMU sample."),
 ):
+    import math
+
     import numpy as np
+    from pydantic import ValidationError
 
     from tanbench.config import Scenario
-    from tanbench.simulation import simulate_vehicle, vehicle_frame
+    from tanbench.runner.sweep import format_validation_error
+    from tanbench.simulation import motion_plan, simulate_vehicle, vehicle_frame
 
     if area not in ("A", "B", "vehicle"):
         raise TanbenchError(f"--area must be A, B or vehicle, not {area!r}")
-    scenario = Scenario(area=area, duration_s=duration)
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise TanbenchError(f"--duration must be a positive number of seconds, not {duration:g}")
+    if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
+        raise TanbenchError(f"--out {out}: use a .parquet or .csv file name")
+    try:
+        scenario = Scenario(area=area, duration_s=duration)
+    except ValidationError as exc:
+        raise TanbenchError(f"--duration: {format_validation_error(exc)}") from None
+    try:
+        motion_plan(scenario)
+    except TanbenchError as exc:  # a duration longer than the trajectory
+        raise TanbenchError(f"--duration: {exc}") from None
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(seed))
     df = vehicle_frame(vehicle, every)
     err = np.hypot(df["nav_e"] - df["truth_e"], df["nav_n"] - df["truth_n"])
@@ -222,8 +260,11 @@ def simulate(
         from tanbench.runner import store
 
         try:
-            store.write_parquet(df, out, {"schema_version": store.SCHEMA_VERSION, "kind": "simulation",
-                                          "scenario": scenario.normalized(), "seed": seed})
+            if out.suffix.lower() == ".csv":
+                store.write_text(df.to_csv(index=False), out)
+            else:
+                store.write_parquet(df, out, {"schema_version": store.SCHEMA_VERSION, "kind": "simulation",
+                                              "scenario": scenario.normalized(), "seed": seed})
         except OSError as exc:
             raise TanbenchError(f"cannot write {out}: {exc.strerror or exc}") from None
         typer.echo(f"wrote {out} ({len(df)} rows x {len(df.columns)} columns)")
@@ -233,8 +274,10 @@ def simulate(
                      + EXAMPLE.format("tanbench terrain stats --sweep configs/monterey.yaml"))
 def terrain_stats(
     sweep_file: Optional[Path] = typer.Option(None, "--sweep", help="Use the worlds of this sweep."),
-    fmt: str = typer.Option("md", "--format", "-f", help="md or json."),
+    fmt: str = typer.Option("md", "--format", "-f", help="md, csv or json."),
 ):
+    import warnings
+
     import pandas as pd
 
     from tanbench.config import Scenario
@@ -244,6 +287,8 @@ def terrain_stats(
     from tanbench.terrain.stats import track_statistics
     from tanbench.vehicle.trajectory import sample_path
 
+    if fmt not in ("md", "csv", "json"):
+        raise TanbenchError(f"--format must be md, csv or json, not {fmt!r}")
     if sweep_file is not None:
         from tanbench.runner.sweep import load_sweep
 
@@ -265,7 +310,17 @@ def terrain_stats(
                     maps[res] = navigation_map(sc.terrain, res)
                 except ValueError:
                     pass
-        stats = track_statistics(truth, pos[:, :2], maps)
+        with warnings.catch_warnings():  # statistics of the on-map points only; all off the map is refused below
+            warnings.simplefilter("ignore", RuntimeWarning)
+            stats = track_statistics(truth, pos[:, :2], maps)
+        if stats["off_map_points"] == stats["points"]:
+            raise TanbenchError(
+                f"{sweep_file or 'area ' + sc.area}: the track (area {sc.area}, trajectory {sc.trajectory.kind}) "
+                f"lies entirely off the map {truth.name}; nothing to measure (check the trajectory's start or "
+                f"centre against the map's extent)")
+        if stats["off_map_points"]:
+            seams.append(f"note: {stats['off_map_points']} of {stats['points']} track points of area {sc.area} "
+                         f"are off the map {truth.name} (left out of the statistics)")
         rows.append({"area": sc.area, "terrain": truth.name, **stats})
         for seam in truth.meta.get("seams", []):
             tiles = " / ".join(Path(str(t)).name for t in seam.get("tiles", ()))
@@ -274,6 +329,8 @@ def terrain_stats(
     df = pd.DataFrame(rows)
     if fmt == "json":
         typer.echo(df.to_json(orient="records", indent=1))
+    elif fmt == "csv":
+        typer.echo(df.to_csv(index=False), nl=False)
     else:
         typer.echo(to_markdown(df, title="seafloor under the track (nadir, 1 Hz)"))
         typer.echo("A flat track (small depth std and slope) is not an error, but TAN has little to work with.")
@@ -282,7 +339,8 @@ def terrain_stats(
 
 
 @app.command(help="Compare two results directories: did NEW's error statistics regress from BASELINE? "
-             "Exit 0 nothing regressed, 1 something did, 2 bad input."
+             "Exit 0 nothing regressed, 1 something did or a cell, method or run is missing on either side, "
+             "2 bad input."
              + EXAMPLE.format("tanbench check results/ci results/ci-baseline --report check.md"))
 def check(
     new: Path = typer.Argument(..., help="Results directory under test."),
@@ -291,6 +349,9 @@ def check(
     margin_abs: float = typer.Option(1.0, "--margin-abs", min=0.0, help="Absolute margin, metres."),
     alpha: float = typer.Option(0.05, "--alpha", min=1e-9, max=0.5, help="Level after Holm's correction."),
     report: Optional[Path] = typer.Option(None, "--report", help="Also write the table (.md, .json or .parquet)."),
+    allow_missing: bool = typer.Option(False, "--allow-missing",
+                                       help="Pass even if cells, methods or runs are in only one directory "
+                                            "(they are still listed)."),
 ):
     from tanbench.check import CheckOptions, compare, render, write_report
 
@@ -299,16 +360,25 @@ def check(
     if report is not None:
         write_report(result, report)
         typer.echo(f"wrote {report}")
-    if result.regressed:
+    if result.missing and not allow_missing:
+        typer.echo(f"check fails: {len(result.missing)} cell(s), method(s) or run(s) are in only one directory "
+                   f"(listed above as 'missing:'; --allow-missing compares only what both hold)", err=True)
+    if result.regressed or (result.missing and not allow_missing):
         raise typer.Exit(1)
 
 
-@app.command(help="Draw the figures of a results directory (PNG under DIR/figures/; needs the plot extra)."
-             + EXAMPLE.format("tanbench plot results/zhou2017"))
-def plot(directory: Path = typer.Argument(..., help="Results directory.")):
+@app.command(help="Draw the figures of a results directory (PNG under DIR/figures/; needs the plot extra). "
+             "Every figure's title names its cell; --cell picks the cells."
+             + EXAMPLE.format("tanbench plot results/zhou2017 --cell all"))
+def plot(
+    directory: Path = typer.Argument(..., help="Results directory."),
+    cell: Optional[list[str]] = typer.Option(
+        None, "--cell", help="Cell id (or a unique prefix) to draw; repeat for several, 'all' for every cell "
+                             "[default: the first cell of each area]."),
+):
     from tanbench.plot import plot_results
 
-    written = plot_results(directory)
+    written = plot_results(directory, cell)
     typer.echo(f"wrote {len(written)} figure(s) under {directory / 'figures'}")
 
 

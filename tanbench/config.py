@@ -23,9 +23,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
+import types
+import typing
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import DISTANCE_INNOVATION, REGULARISATION, REGULARISED_STATES, RESAMPLING, choices
 from tanbench.paperdata import scenario_facts
@@ -50,8 +53,51 @@ def new_option(default, *, neutral=_SAME, **field_kwargs):
     return Field(default, json_schema_extra=extra, **field_kwargs)
 
 
+def _is_numeric(annotation) -> bool:
+    """Whether a field takes numbers (int or float, alone, in a union or in a tuple) and no booleans."""
+    kinds = set()
+
+    def walk(ann):
+        origin = typing.get_origin(ann)
+        if origin in (typing.Union, types.UnionType, tuple):
+            for arg in typing.get_args(ann):
+                walk(arg)
+        elif ann in (bool, int, float):
+            kinds.add(ann)
+
+    walk(annotation)
+    return bool(kinds) and bool not in kinds
+
+
+def plain_number_check(model: type[BaseModel], value, field_name: str):
+    """Refuse a boolean where a number (or text) is expected, and any non-finite number.
+
+    YAML reads ``true`` as a boolean and pydantic would take it as 1; ``.inf`` and
+    ``.nan`` are floats that no scenario parameter can mean. (Fields in
+    ``NON_FINITE_OK`` take non-finite values on purpose, e.g. a file's ``nodata``.)
+    """
+    info = model.model_fields.get(field_name)
+    if info is None or field_name in NON_FINITE_OK:
+        return value
+    items = value if isinstance(value, (list, tuple)) else (value,)
+    for item in items:
+        if isinstance(item, bool) and _is_numeric(info.annotation):
+            raise ValueError(f"expected a number, not the boolean {str(item).lower()}")
+        if isinstance(item, float) and not math.isfinite(item):
+            raise ValueError(f"must be a finite number, not {item}")
+    return value
+
+
+NON_FINITE_OK = {"nodata"}
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _plain_numbers(cls, value, info: ValidationInfo):
+        return plain_number_check(cls, value, info.field_name)
 
 
 Pos = float  # documentation alias: metres
@@ -261,6 +307,10 @@ class Scenario(_Strict):
             raise ValueError(
                 f"sampling_time_s ({self.sampling_time_s:g}) must be a whole number of sonar pings "
                 f"({ping:g} s at sensors.sonar_rate_hz={self.sensors.sonar_rate_hz:g})")
+        if self.duration_s is not None and self.duration_s < ping - 1e-9:
+            raise ValueError(
+                f"duration_s ({self.duration_s:g} s) is shorter than one sonar ping ({ping:g} s at "
+                f"sensors.sonar_rate_hz={self.sensors.sonar_rate_hz:g})")
         if self.map_resolution_m < (self.terrain.truth_resolution_m if self.terrain.kind == "synthetic" else 0):
             raise ValueError(
                 f"map_resolution_m ({self.map_resolution_m:g}) is finer than the truth grid "

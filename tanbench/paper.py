@@ -56,3 +56,7 @@ def compare_with_paper(tables: dict[str, pd.DataFrame]) -> dict[str, pd.DataFram
             merged["ratio_time_avg"] = merged["mean_time_avg_error_m"] / merged["paper_mean_time_avg_error_m"]
         out[name] = merged
     return out
+
+
+# our table names that have a published counterpart (configs/zhou2017.yaml names them so)
+PAPER_TABLES = ("table3", "table4", "table5", "table6", "table7", "table9")

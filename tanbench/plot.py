@@ -1,10 +1,13 @@
 """Figures for a results directory (matplotlib, the ``plot`` extra).
 
-For one cell per area (the first of the sweep in each area, i.e. its default cell) the
-analogs of the paper's Figures 4-7 (area A), 8-11 (area B) and 14-15 (vehicle run):
-east, north and horizontal position and error against time, heading against time, the
-Monte Carlo mean of each method with the truth in black; and the tracks over the map's
-contours (Figures 2-3, 6, 10). Written as PNG under ``DIR/figures/``.
+For one cell per area by default (the first of the sweep in each area, i.e. its default
+cell), or for the cells asked for (``--cell ID``, ``--cell all``), the analogs of the
+paper's Figures 4-7 (area A), 8-11 (area B) and 14-15 (vehicle run): east, north and
+horizontal position and error against time, heading against time, the Monte Carlo mean
+of each method with the truth in black; and the tracks over the map's contours (Figures
+2-3, 6, 10). Written as PNG under ``DIR/figures/``: ``<area>_<figure>.png`` for the
+default cell of an area, ``<area>_<cell id>_<figure>.png`` for any other cell. Every
+figure's title names its cell (id and the values its tables vary).
 """
 
 from __future__ import annotations
@@ -56,23 +59,61 @@ def representative_cells(sweep) -> list:
     return out
 
 
-def plot_results(directory) -> list[Path]:
-    """Write every figure for ``directory``; returns the files written."""
+def cell_title(cell) -> str:
+    """How a figure names its cell: area, id and the values its tables vary."""
+    varied = ", ".join(f"{k}={v}" for k, v in cell.varied.items() if k != "area") or "defaults"
+    return f"area {cell.scenario.area}, cell {cell.cell_id} ({varied})"
+
+
+def select_cells(sweep, stored: set, wanted: list[str] | None) -> list:
+    """The cells to draw: the default cell of each area, every cell (``["all"]``) or the ids
+    (or unique id prefixes) in ``wanted``; only cells whose series are stored."""
+    with_series = [c for c in sweep.cells if c.cell_id in stored]
+    if not wanted:
+        return [c for c in representative_cells(sweep) if c.cell_id in stored]
+    if "all" in wanted:
+        return with_series
+    chosen = []
+    for want in wanted:
+        found = [c for c in with_series if c.cell_id.startswith(want)]
+        if len(found) != 1:
+            known = "; ".join(cell_title(c) for c in with_series)
+            raise TanbenchError(f"--cell {want}: {'no' if not found else 'more than one'} cell with stored series "
+                                f"has this id (cells: {known}; or --cell all)")
+        if found[0] not in chosen:
+            chosen.append(found[0])
+    return chosen
+
+
+def plot_results(directory, cells: list[str] | None = None) -> list[Path]:
+    """Write the figures of ``directory`` for the cells asked for (see :func:`select_cells`);
+    returns the files written."""
+    plt = _pyplot()
     from tanbench.results import load_series
     from tanbench.runner.sweep import load_results_sweep
-    from tanbench.terrain import navigation_map
 
-    plt = _pyplot()
     directory = Path(directory)
     sweep = load_results_sweep(directory)
     series = load_series(directory)
     figdir = directory / "figures"
-    figdir.mkdir(parents=True, exist_ok=True)
+    chosen = select_cells(sweep, set(series["cell_id"]), cells)
+    try:
+        figdir.mkdir(parents=True, exist_ok=True)
+        return _draw(sweep, chosen, series, figdir, plt)
+    except OSError as exc:
+        raise TanbenchError(f"cannot write the figures under {figdir} ({exc.strerror or exc}); "
+                            f"plot a writable copy of {directory}") from None
+
+
+def _draw(sweep, cells, series, figdir: Path, plt) -> list[Path]:
+    from tanbench.terrain import navigation_map
+
     written = []
-    cells = [c for c in representative_cells(sweep) if c.cell_id in set(series["cell_id"])]
+    defaults = {c.cell_id for c in representative_cells(sweep)}
     for cell in cells:
         s = series[series["cell_id"] == cell.cell_id]
-        label = cell.scenario.area
+        label = cell.scenario.area if cell.cell_id in defaults else f"{cell.scenario.area}_{cell.cell_id}"
+        title = cell_title(cell)
         methods = [m for m in sweep.spec.methods if m in set(s["method"])]
         style = method_styles(methods)
         first = s[s["method"] == methods[0]]
@@ -88,7 +129,7 @@ def plot_results(directory) -> list[Path]:
             ax2.set_ylabel(f"{name} error (m)")
             ax2.set_xlabel("time (s)")
             ax1.legend(fontsize=8)
-            ax1.set_title(f"area {label}: {name} position and error, Monte Carlo mean")
+            ax1.set_title(f"{title}\n{name} position and error, Monte Carlo mean", fontsize=10)
             written.append(_save(fig, figdir / f"{label}_{name}.png", plt))
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 5))
         nmap = navigation_map(cell.scenario.terrain, cell.scenario.map_resolution_m)
@@ -103,10 +144,11 @@ def plot_results(directory) -> list[Path]:
         ax1.set_xlabel("east (m)")
         ax1.set_ylabel("north (m)")
         ax1.legend(fontsize=8)
-        ax1.set_title(f"area {label}: horizontal position (MC mean)")
+        ax1.set_title("horizontal position (MC mean)", fontsize=10)
         ax2.set_xlabel("time (s)")
         ax2.set_ylabel("horizontal error (m)")
-        ax2.set_title("horizontal error: MC mean, 5-95 % band")
+        ax2.set_title("horizontal error: MC mean, 5-95 % band", fontsize=10)
+        fig.suptitle(title, fontsize=11)
         written.append(_save(fig, figdir / f"{label}_horizontal.png", plt))
         fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
         # unwrapped so a track through north does not jump between 0 and 360 deg
@@ -121,9 +163,9 @@ def plot_results(directory) -> list[Path]:
         ax2.set_ylabel("|heading error| (deg)")
         ax2.set_xlabel("time (s)")
         ax1.legend(fontsize=8)
-        ax1.set_title(f"area {label}: heading, Monte Carlo mean")
+        ax1.set_title(f"{title}\nheading, Monte Carlo mean", fontsize=10)
         written.append(_save(fig, figdir / f"{label}_heading.png", plt))
-    written += _track_maps(cells, series, figdir, plt)
+    written += _track_maps(cells, series, figdir, plt, by_group=not {c.cell_id for c in cells} <= defaults)
     return written
 
 
@@ -138,8 +180,9 @@ def _contours(ax, nmap, first, margin):
     ax.set_aspect("equal")
 
 
-def _track_maps(cells, series, figdir, plt) -> list[Path]:
-    """Tracks over the contours of each terrain (Figures 2-3)."""
+def _track_maps(cells, series, figdir, plt, by_group: bool = False) -> list[Path]:
+    """Tracks over the contours of each terrain (Figures 2-3): ``tracks.png``, ``tracks_2.png``, ...
+    for the default cells, ``tracks_<first cell id>.png`` for others (``by_group``)."""
     from tanbench.terrain import navigation_map
 
     out = []
@@ -158,13 +201,14 @@ def _track_maps(cells, series, figdir, plt) -> list[Path]:
             s = series[series["cell_id"] == cell.cell_id]
             first = s[s["method"] == s["method"].iloc[0]]
             ax.plot(first["truth_e"], first["truth_n"], "r-", lw=1.2)
-            ax.annotate(f"area {cell.scenario.area}", (first["truth_e"].iloc[0], first["truth_n"].iloc[0]),
+            ax.annotate(f"area {cell.scenario.area}, cell {cell.cell_id}", (first["truth_e"].iloc[0], first["truth_n"].iloc[0]),
                         color="w", fontsize=9, xytext=(5, -12), textcoords="offset points")
         ax.set_aspect("equal")
         ax.set_xlabel("east (m)")
         ax.set_ylabel("north (m)")
-        ax.set_title(f"tracks over the {sc.map_resolution_m:g} m navigation map ({nmap.name})")
-        name = "tracks.png" if k == 0 else f"tracks_{k + 1}.png"
+        ax.set_title(f"tracks over the {sc.map_resolution_m:g} m navigation map ({nmap.name}); "
+                     f"cell{'s' if len(group) > 1 else ''} {', '.join(c.cell_id for c in group)}", fontsize=10)
+        name = f"tracks_{group[0].cell_id}.png" if by_group else ("tracks.png" if k == 0 else f"tracks_{k + 1}.png")
         out.append(_save(fig, figdir / name, plt))
     return out
 

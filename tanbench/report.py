@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from tanbench.errors import TanbenchError
+
 TITLES = {
     "table3": "Table 3: area A, defaults (10 m map, noise +-1 m, 1 s, 3000 particles)",
     "table4": "Table 4: map resolution",
@@ -77,6 +79,13 @@ def write_report(directory, discussion: Path | None = None) -> Path:
 
     directory = Path(directory)
     sweep = load_results_sweep(directory)
+    missing = [name for name in TITLES if name not in sweep.table_designs]
+    if missing:
+        have = ", ".join(sweep.table_designs) or "none"
+        raise TanbenchError(
+            f"{directory}: report needs the paper's tables ({', '.join(TITLES)}: the sweep configs/zhou2017.yaml); "
+            f"this sweep ({sweep.name}) has {have}, missing {', '.join(missing)}. "
+            f"For other sweeps use `tanbench tables {directory}` and `tanbench plot {directory}`")
     runs = load(directory)
     meta = store.read_meta(store.run_files(directory)[0])
     tables = compare_with_paper(sweep_tables(runs, sweep))

@@ -127,3 +127,9 @@ def load_tables(directory: Path) -> dict[str, pd.DataFrame]:
 def error_lines(stderr: str) -> list[str]:
     """The non-empty lines of a stderr text."""
     return [line for line in stderr.splitlines() if line.strip()]
+
+
+def counted(tasks: int, n_methods: int = len(METHODS)) -> str:
+    """How the CLI counts tasks: '6 tasks (18 runs)' (a task is one run of a cell with every method)."""
+    runs = tasks * n_methods
+    return f"{tasks} task{'s' if tasks != 1 else ''} ({runs} run{'s' if runs != 1 else ''})"

@@ -1,15 +1,23 @@
-"""Bad input through the CLI: exactly one `error:` line naming the problem, exit code 2, no traceback.
+"""Bad input through the CLI: exactly one `error:` line naming the problem, exit code 2, no traceback,
+and nothing already stored changed.
 
 One table of cases (sweep YAML, map files, results and output directories, a Dask
-address); ``{maps}``, ``{tmp}`` and ``{sweep}`` in a case are filled in at run time.
+address); ``{maps}``, ``{tmp}``, ``{sweep}`` and ``{out}`` in a case are filled in at run
+time. A case's setup may store results first (a copy of the committed CI baseline);
+every file under the test's directory is compared before and after the command. A few
+cases are unusual input that must do the right thing instead (``code=0``, or ``code=1``
+for `check` with missing cells), with their own assertions (``then=``).
 """
 
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 import os
+import shutil
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -18,7 +26,7 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from sweep_support import cli, error_lines
+from sweep_support import ROOT, WALL_COLUMNS, cli, error_lines
 
 BASE = {"name": "bad", "seed": 1, "runs": 2, "scenario": {"particles": 60, "duration_s": 60}}
 
@@ -78,8 +86,85 @@ def unwritable_output(tmp):
     return {"out": str(tmp / "a-file" / "sub")}
 
 
-def case(id, args, data, *fragments, setup=None, max_s=None):
-    return pytest.param(args, data, fragments, setup, max_s, id=id)
+BASELINE = ROOT / "results" / "ci-baseline"
+
+
+def stored_results(tmp):
+    """A copy of the committed CI baseline (3 cells x 3 methods x 30 runs) as already stored results."""
+    out = tmp / "out"
+    shutil.copytree(BASELINE, out, ignore=shutil.ignore_patterns(".work", "figures", "REPORT.md"))
+    return {"out": str(out)}
+
+
+def baseline_missing_cells(tmp):
+    """The CI baseline with 2 of its 3 cell directories deleted (as a run that lost cells)."""
+    values = stored_results(tmp)
+    for cell in sorted((tmp / "out" / "runs").glob("cell_id=*"))[:2]:
+        shutil.rmtree(cell)
+    return values
+
+
+def baseline_missing_runs_and_method(tmp):
+    """The CI baseline with runs 28-29 of every cell and every loose-dvl row deleted."""
+    values = stored_results(tmp)
+    for path in (tmp / "out" / "runs").glob("cell_id=*/runs.parquet"):
+        table = pq.read_table(path)
+        df = table.to_pandas()
+        df = df[(df["run"] < 28) & (df["method"] != "loose-dvl")]
+        pq.write_table(pa.Table.from_pandas(df, schema=table.schema, preserve_index=False), path)
+    return values
+
+
+def read_only_figures(tmp):
+    """Stored results whose figures cannot be written: a read-only directory (or, as root, who
+    may write there anyway, a regular file where DIR/figures/ should be)."""
+    values = stored_results(tmp)
+    out = tmp / "out"
+    out.chmod(0o500)
+    try:
+        (out / "probe").write_text("")
+    except OSError:
+        return values
+    (out / "probe").unlink()
+    out.chmod(0o700)
+    (out / "figures").write_text("")
+    return values
+
+
+def regular_file(tmp):
+    (tmp / "a-file").write_text("keep me")
+    return {"out": str(tmp / "a-file")}
+
+
+def case(id, args, data, *fragments, setup=None, max_s=None, code=2, then=None):
+    return pytest.param(args, data, fragments, setup, max_s, code, then, id=id)
+
+
+def csv_header(expected):
+    """A ``then=`` check: stdout is CSV whose header is ``expected``."""
+    def check(tmp, proc):
+        assert proc.stdout.splitlines()[0] == expected, proc.stdout[:300]
+        assert "|" not in proc.stdout
+    return check
+
+
+def simulated_csv(tmp, proc):
+    text = (tmp / "run.csv").read_text()
+    df = pd.read_csv(tmp / "run.csv")
+    assert not text.startswith("PAR1") and {"t", "truth_e", "nav_e"} <= set(df.columns) and len(df) > 100
+
+
+def other_runs_kept(tmp, proc):
+    """After `--runs 1 --force` on the 30-run baseline: run 0 recomputed, runs 1-29 kept as they were."""
+    before = pd.read_parquet(BASELINE / "runs").drop(columns=WALL_COLUMNS)
+    after = pd.read_parquet(tmp / "out" / "runs").drop(columns=WALL_COLUMNS)
+    assert "1 run(s) per cell" not in proc.stdout
+    key = ["cell_id", "method", "run"]
+    assert sorted(map(tuple, after[key].to_numpy())) == sorted(map(tuple, before[key].to_numpy()))
+    keep = lambda df: df[df["run"] >= 1].sort_values(key).reset_index(drop=True)  # noqa: E731
+    pd.testing.assert_frame_equal(keep(after), keep(before))
+    tables = pd.read_parquet(tmp / "out" / "tables" / "map_resolution.parquet")
+    assert (tables["n_runs"] == 30).all()
 
 
 CASES = [
@@ -153,8 +238,95 @@ CASES = [
          setup=lambda tmp: incompatible_results(tmp, "x")),
     case("tables-of-a-non-results-directory", ["tables", "{tmp}"], None, "no sweep.yaml"),
     case("tables-unknown-format", ["tables", "{tmp}", "--format", "xlsx"], None, "--format must be md or csv"),
-    case("output-not-writable", ["run", "{sweep}", "--out", "{out}"], BASE, "is not writable",
+    case("output-not-writable", ["run", "{sweep}", "--out", "{out}"], BASE, "output directory {tmp}/",
          setup=unwritable_output),
+    case("output-is-a-regular-file", ["run", "{sweep}", "--out", "{out}"], BASE,
+         "output directory {tmp}/a-file is a file, not a directory", setup=regular_file),
+    # names that become paths (results/<sweep>, DIR/tables/<table>.parquet)
+    *[case(f"table-name-{label}", ["run", "{sweep}", "--out", "{out}"],
+           sweep(tables={name: {"noise_m": [1.0]}}), "tables: table name", "cannot be used as a file name",
+           setup=stored_results)
+      for label, name in (("into-a-cell", "../runs/cell_id=5c549171676e64c8/runs"), ("parent", "../../evil"),
+                          ("slash", "a/b"), ("empty", ""), ("hidden", ".x"), ("dot", "."), ("dotdot", ".."))],
+    case("table-named-grid-with-a-grid", ["validate", "{sweep}"],
+         sweep(tables={"grid": {"noise_m": [1.0]}}, grid={"noise_m": [2.0]}), "table name 'grid' is taken"),
+    *[case(f"sweep-name-{label}", ["run", "{sweep}"], sweep(name=name), "name: sweep name",
+           "cannot be used as a file name")
+      for label, name in (("dot", "."), ("dotdot", ".."), ("slash", "a/b"), ("empty", ""))],
+    # YAML that would silently keep the last of two values
+    case("table-listed-twice", ["run", "{sweep}", "--out", "{out}"],
+         "name: bad\nseed: 1\nruns: 2\ntables:\n  t4: {noise_m: [1]}\n  t4: {noise_m: [2]}\n",
+         "malformed YAML at line 6", "duplicate key 't4' (first given at line 5)", setup=stored_results),
+    case("key-given-twice", ["validate", "{sweep}"], "name: bad\nseed: 1\nruns: 2\nscenario:\n  particles: 60\n"
+         "  noise_m: 1\n  particles: 90\n", "line 7", "duplicate key 'particles' (first given at line 5)"),
+    # booleans are not numbers; non-finite numbers are refused
+    case("particles-true", ["run", "{sweep}", "--out", "{out}"], sweep(scenario__particles=True),
+         "scenario.particles: expected a number, not the boolean true", setup=stored_results),
+    case("runs-true", ["validate", "{sweep}"], sweep(runs=True), "runs: expected a number, not the boolean true"),
+    case("boolean-in-a-table", ["validate", "{sweep}"], sweep(tables={"t": {"noise_m": [1.0, False]}}),
+         "tables.t: noise_m: expected a number, not the boolean false"),
+    case("boolean-in-a-tuple", ["validate", "{sweep}"], sweep(scenario__trajectory__start_enu_m=[1000, True, 0]),
+         "scenario.trajectory.start_enu_m: expected a number, not the boolean true"),
+    case("noise-inf", ["validate", "{sweep}"], "name: bad\nseed: 1\nruns: 2\nscenario: {noise_m: .inf}\n",
+         "scenario.noise_m: must be a finite number, not inf"),
+    case("nan-in-a-table", ["validate", "{sweep}"],
+         "name: bad\nseed: 1\nruns: 2\ntables:\n  t: {map_resolution_m: [10, .nan]}\n",
+         "tables.t: map_resolution_m: must be a finite number, not nan"),
+    # run lengths
+    case("duration-shorter-than-a-ping", ["validate", "{sweep}"], sweep(scenario__duration_s=0.001),
+         "scenario.duration_s (0.001 s) is shorter than one sonar ping (1 s"),
+    case("sampling-time-longer-than-the-run", ["validate", "{sweep}"],
+         sweep(scenario__duration_s=None, scenario__sampling_time_s=100000, scenario__map_resolution_m=20),
+         "bad.yaml: cell", "sampling_time_s (100000 s) is longer than the run (1190 s)"),
+    case("sampling-time-longer-than-duration", ["run", "{sweep}", "--out", "{out}"],
+         sweep(scenario__sampling_time_s=90), "sampling_time_s (90 s) is longer than the run (60 s)",
+         setup=stored_results),
+    # simulate
+    *[case(f"simulate-duration-{label}", ["simulate", "--duration", value],
+           None, f"--duration must be a positive number of seconds, not {label}")
+      for label, value in (("-5", "-5"), ("0", "0"), ("nan", "nan"))],
+    case("simulate-duration-too-short", ["simulate", "--duration", "0.001"], None,
+         "--duration: duration_s (0.001 s) is shorter than one sonar ping"),
+    case("simulate-duration-too-long", ["simulate", "--duration", "5000"], None,
+         "--duration: duration_s (5000 s) is longer than the trajectory (1190 s)"),
+    case("simulate-negative-seed", ["simulate", "--seed", "-1"], None, "'--seed'", "greater than or equal to 0"),
+    case("simulate-unknown-suffix", ["simulate", "--out", "{tmp}/run.txt"], None,
+         "--out {tmp}/run.txt: use a .parquet or .csv file name"),
+    case("simulate-csv", ["simulate", "--duration", "20", "--out", "{tmp}/run.csv"], None, "wrote {tmp}/run.csv",
+         code=0, then=simulated_csv),
+    # results directories
+    case("report-needs-the-papers-tables", ["report", "{out}"], None,
+         "report needs the paper's tables", "this sweep (ci) has map_resolution, sampling_time",
+         "tanbench tables", setup=stored_results),
+    case("plot-cannot-write", ["plot", "{out}"], None, "cannot write the figures under {tmp}/out/figures",
+         setup=read_only_figures),
+    case("plot-unknown-cell", ["plot", "{out}", "--cell", "nosuchcell"], None,
+         "--cell nosuchcell: no cell with stored series has this id", "area A, cell 5c549171676e64c8",
+         setup=stored_results),
+    case("tables-compare-paper-not-the-paper", ["tables", "{out}", "--compare-paper"], None,
+         "note: --compare-paper: none of this sweep's tables (map_resolution, sampling_time) is one of the paper's",
+         setup=stored_results, code=0),
+    case("check-missing-cells", ["check", "{out}", str(BASELINE)], None,
+         "missing: cell only in BASELINE: ", "6 unchanged", "2 missing", "check fails: 2 cell(s)",
+         setup=baseline_missing_cells, code=1),
+    case("check-missing-cells-allowed", ["check", "{out}", str(BASELINE), "--allow-missing"], None,
+         "missing: cell only in BASELINE: ", "2 missing", setup=baseline_missing_cells, code=0),
+    case("check-missing-runs-and-method", ["check", str(BASELINE), "{out}"], None,
+         "missing: method loose-dvl only in NEW: cell 5c549171676e64c8",
+         "missing: runs 28, 29 of tight-dvl only in NEW (ok runs): cell 5c549171676e64c8", "9 missing",
+         setup=baseline_missing_runs_and_method, code=1),
+    case("force-with-fewer-runs-keeps-the-others",
+         ["run", "{out}/sweep.yaml", "--out", "{out}", "--runs", "1", "--force", "--workers", "1", "-q"], None,
+         "ci: 3 tasks (9 runs) run, 0 tasks (0 runs) already done", setup=stored_results, code=0,
+         then=other_runs_kept),
+    # terrain stats
+    case("terrain-stats-track-off-the-map", ["terrain", "stats", "--sweep", "{sweep}"],
+         file_sweep(scenario__trajectory__centre_en_m=[5000, 5000]),
+         "lies entirely off the map file:map.npy; nothing to measure"),
+    case("terrain-stats-csv", ["terrain", "stats", "--sweep", "{sweep}", "-f", "csv"], file_sweep(),
+         "area,terrain,points,depth_mean_m", code=0,
+         then=csv_header("area,terrain,points,depth_mean_m,depth_std_m,depth_min_m,depth_max_m,mean_slope_deg,"
+                         "off_map_points,map_rms_10m,map_rms_20m,map_rms_30m")),
     case("dask-scheduler-not-answering", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "tcp://127.0.0.1:1"],
          BASE, "cannot reach the Dask scheduler at tcp://127.0.0.1:1", max_s=30),
 ]
@@ -265,19 +437,41 @@ def prepare(tmp_path, maps, args, data, setup):
     return [fill(a, values) for a in args]
 
 
-@pytest.mark.parametrize("args, data, fragments, setup, max_s", CASES)
-def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, setup, max_s):
-    """The CLI prints one `error:` line naming the problem, exits 2, shows no traceback."""
+def snapshot(root: Path) -> dict[str, str]:
+    """Every file under ``root`` (hidden ones too) and a hash of its bytes."""
+    out = {}
+    for path in sorted(root.rglob("*")):
+        if path.is_file():
+            out[str(path.relative_to(root))] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return out
+
+
+@pytest.mark.parametrize("args, data, fragments, setup, max_s, code, then", CASES)
+def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, setup, max_s, code, then):
+    """Bad input: one `error:` line naming the problem, exit 2, no traceback, nothing stored changed.
+    (The cases with another ``code`` say what they print instead, on stdout or stderr.)"""
     argv = prepare(tmp_path, maps, args, data, setup)
+    root_results = snapshot(ROOT / "results")
+    before = snapshot(tmp_path)
     started = time.monotonic()
-    proc = cli(*argv, timeout=120)
+    proc = cli(*argv, timeout=240)
     elapsed = time.monotonic() - started
-    lines = error_lines(proc.stderr)
-    assert proc.returncode == 2, (proc.returncode, proc.stderr)
-    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
-    for fragment in fragments:
-        assert fill(fragment, {"tmp": tmp_path}) in lines[0]
+    assert proc.returncode == code, (proc.returncode, proc.stdout[-2000:], proc.stderr)
     assert "Traceback" not in proc.stderr + proc.stdout
+    assert "Warning" not in proc.stderr, proc.stderr
+    if code == 2:
+        lines = error_lines(proc.stderr)
+        assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+        text = lines[0]
+    else:
+        text = proc.stdout + proc.stderr
+    for fragment in fragments:
+        assert fill(fragment, {"tmp": tmp_path}) in text, text[-3000:]
+    if then is None:  # nothing stored changed (the project's results/ included)
+        assert snapshot(tmp_path) == before
+    else:
+        then(tmp_path, proc)
+    assert snapshot(ROOT / "results") == root_results
     if max_s is not None:
         assert elapsed < max_s
 
@@ -311,3 +505,19 @@ def test_usage_errors_are_one_line_too(tmp_path, maps):
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
     assert "--workers" in lines[0]
     assert not os.path.exists(tmp_path / "results")
+
+
+@pytest.mark.parametrize("data", [
+    sweep(scenario__noise_m=float("inf")),
+    sweep(scenario__duration_s=0.001),
+    sweep(scenario__duration_s=None, scenario__sampling_time_s=100000, scenario__map_resolution_m=20),
+    file_sweep(scenario__filter__initial_area_m=2000),
+], ids=["noise-inf", "duration-0.001", "sampling-longer-than-the-run", "initial-uncertainty-off-the-map"])
+def test_validate_refuses_what_run_refuses(tmp_path, maps, data):
+    """`validate` and `run` give the same one error line (run before any task, storing nothing)."""
+    argv = prepare(tmp_path, maps, ["validate", "{sweep}"], data, None)
+    checked = cli(*argv)
+    ran = cli("run", argv[1], "--out", tmp_path / "out", "--workers", 1, "-q")
+    assert checked.returncode == ran.returncode == 2, (checked.stderr, ran.stderr)
+    assert error_lines(checked.stderr) == error_lines(ran.stderr) and len(error_lines(ran.stderr)) == 1
+    assert not list((tmp_path / "out").rglob("*.parquet"))

@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from sweep_support import (
+    counted,
     assert_same_runs, cli, finished_runs, kill_group, load_tables, start_cli, sweep_dict, wait_for_runs,
     write_sweep,
 )
@@ -102,7 +103,7 @@ def test_sigkill_then_resume_matches_uninterrupted(reference, tmp_path, after):
 
     again = cli(*args)
     assert again.returncode == 0, again.stderr
-    assert f"{N_TASKS - stored} task(s) run, {stored} already done" in again.stdout
+    assert f"{counted(N_TASKS - stored)} run, {counted(stored)} already done" in again.stdout
     assert not stale.exists()
     assert_clean_and_readable(out)
     assert_finished_like(out, ref_out)
@@ -125,7 +126,7 @@ def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path):
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr
     hint = [line for line in stderr.splitlines() if line.startswith("interrupted:")]
-    assert len(hint) == 1 and f"resume with: tanbench run {sweep} --out {out}" in hint[0]
+    assert len(hint) == 1 and f"resume with: tanbench run {sweep} --out {out} --workers 2" in hint[0]
     assert wait_group_gone(proc.pid), "worker processes outlived the CLI"
     stored = finished_runs(out)
     assert seen <= stored < N_TASKS
@@ -134,6 +135,6 @@ def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path):
 
     again = cli(*args, "-q")
     assert again.returncode == 0, again.stderr
-    assert f"{N_TASKS - stored} task(s) run, {stored} already done" in again.stdout
+    assert f"{counted(N_TASKS - stored)} run, {counted(stored)} already done" in again.stdout
     assert_clean_and_readable(out)
     assert_finished_like(out, ref_out)

@@ -18,6 +18,7 @@ import pytest
 import yaml
 
 from sweep_support import (
+    counted,
     METHODS, RUN_COLUMNS, TABLE_COLUMNS, assert_same_runs, cli, load_tables, sweep_dict, write_sweep,
 )
 from tanbench import results
@@ -64,7 +65,7 @@ def copy_results(base, tmp_path):
 def test_run_writes_pandas_readable_results(base):
     """A CLI run writes runs/, series/summary.parquet and tables/*.parquet|.md, each one pandas line."""
     sweep, out, proc = base
-    assert f"{N_TASKS} task(s) run, 0 already done" in proc.stdout
+    assert f"{counted(N_TASKS)} run, {counted(0)} already done" in proc.stdout
     runs = pd.read_parquet(out / "runs")
     assert set(RUN_COLUMNS) <= set(runs.columns)
     assert len(runs) == N_CELLS * len(METHODS) * RUNS
@@ -147,10 +148,10 @@ def test_plan_shows_cells_progress_and_estimate(base, tmp_path):
     before = cli("plan", sweep, "--out", tmp_path / "fresh", "--workers", 2)
     assert before.returncode == 0, before.stderr
     assert before.stdout.count(f"0/{RUNS} done") == N_CELLS
-    assert re.search(rf"to do: {N_TASKS} task\(s\) \({N_TASKS * 3} runs\), about \d+ s on 2 worker", before.stdout)
+    assert re.search(rf"to do: {N_TASKS} tasks \({N_TASKS * 3} runs\), about \d+ s on 2 worker", before.stdout)
     after = cli("plan", sweep, "--out", out)
     assert after.stdout.count(f"{RUNS}/{RUNS} done") == N_CELLS
-    assert "to do: 0 task(s) (0 runs)" in after.stdout
+    assert "to do: nothing, every task is stored in" in after.stdout
     assert not (tmp_path / "fresh").exists()  # planning writes nothing
 
 
@@ -189,7 +190,7 @@ def test_changed_cell_gets_new_id_and_old_results_leave_the_tables(base, tmp_pat
     assert plan.stdout.count(f"0/{RUNS} done") == 1 and plan.stdout.count(f"{RUNS}/{RUNS} done") == 2
     proc = cli("run", sweep, "--out", out, "--workers", 2, "-q")
     assert proc.returncode == 0, proc.stderr
-    assert f"{RUNS} task(s) run, {N_TASKS - RUNS} already done" in proc.stdout
+    assert f"{counted(RUNS)} run, {counted(N_TASKS - RUNS)} already done" in proc.stdout
     tables = load_tables(out)
     assert set(tables["map_resolution"]["map_resolution_m"]) == {10.0, 30.0}
     assert (tables["map_resolution"]["n_runs"] == RUNS).all()
@@ -202,7 +203,7 @@ def test_changing_a_hidden_setting_reruns_every_cell(base, tmp_path):
     write_sweep(sweep, sweep_dict(scenario={"filter": {"ess_threshold": 0.3}}))
     proc = cli("run", sweep, "--out", out, "--workers", 2, "-q")
     assert proc.returncode == 0, proc.stderr
-    assert f"{N_TASKS} task(s) run, 0 already done" in proc.stdout
+    assert f"{counted(N_TASKS)} run, {counted(0)} already done" in proc.stdout
     after = load_tables(out)["map_resolution"]
     assert (after["n_runs"] == RUNS).all()  # only the new cells' runs, not old + new
     assert not np.allclose(after["mean_final_error_m"], before["mean_final_error_m"])
@@ -216,7 +217,7 @@ def test_force_recomputes_identically(base, tmp_path):
     stamp = some_file.stat().st_mtime_ns
     proc = cli("run", sweep, "--out", out, "--workers", 2, "-q", "--force")
     assert proc.returncode == 0, proc.stderr
-    assert f"{N_TASKS} task(s) run, 0 already done" in proc.stdout
+    assert f"{counted(N_TASKS)} run, {counted(0)} already done" in proc.stdout
     assert some_file.stat().st_mtime_ns != stamp
     assert_same_runs(results.load(out), before)
 
@@ -229,7 +230,7 @@ def test_runs_option_overrides_the_file(base, tmp_path):
     assert f"x 5 run(s) = {N_CELLS * 3 * 5} runs in {N_CELLS * 5} task(s)" in plan.stdout
     proc = cli("run", sweep, "--out", out, "--workers", 2, "-q", "--runs", 5)
     assert proc.returncode == 0, proc.stderr
-    assert f"{N_CELLS * 2} task(s) run, {N_TASKS} already done" in proc.stdout
+    assert f"{counted(N_CELLS * 2)} run, {counted(N_TASKS)} already done" in proc.stdout
     runs = results.load(out)
     assert run_indices(runs) == {(0, 1, 2, 3, 4)}
     assert_same_runs(runs[runs["run"] < RUNS], before)
@@ -279,7 +280,7 @@ def test_failed_run_is_recorded_and_the_rest_finish(tmp_path):
 
     retry = cli("run", sweep, "--out", out, "--workers", 2, "-q")  # no fault now: the failed tasks rerun
     assert retry.returncode == 0, retry.stderr
-    assert f"{RUNS} task(s) run, {N_TASKS - RUNS} already done" in retry.stdout
+    assert f"{counted(RUNS)} run, {counted(N_TASKS - RUNS)} already done" in retry.stdout
     assert (results.load(out)["status"] == "ok").all()
 
 

@@ -3,7 +3,8 @@
 The parent process owns the results directory: workers return their rows and series,
 the parent writes one file per finished task (atomically), so killing a sweep at any
 moment loses at most the tasks in flight, and re-running the same command resumes:
-tasks whose every row is stored with status "ok" are skipped (``--force`` recomputes).
+tasks whose every row is stored with status "ok" are skipped (``--force`` recomputes the
+sweep's tasks and keeps stored runs outside its range).
 When every task is done, the series summary and the tables are rebuilt from what is
 stored for the sweep's current cells.
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, wait
@@ -30,7 +32,14 @@ from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.schema import rows_table
 
 SERIES_MODES = ("none", "summary", "full")
-SIMULATION_S = 0.1
+# Time model of `tanbench plan` (calibration: docs/results.md, "How long a sweep takes").
+# Costs on one uncontended core of the 2-core development machine; the estimate divides
+# them by the share of a core each process gets at the current load average.
+# (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
+SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
+COMPILE_S = 12.0  # numba compiling every kernel (cold on-disk cache), one process
+WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
+FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
 
 
 @dataclass
@@ -48,9 +57,27 @@ class Plan:
         return [t for t in self.tasks if t.key not in self.done]
 
     def estimate_seconds(self, tasks=None) -> float:
+        """Wall seconds of running ``tasks`` (default: what is left to do), compilation included."""
+        return sum(self.estimate_parts(tasks).values())
+
+    def estimate_parts(self, tasks=None, load: float | None = None, warm: bool | None = None) -> dict[str, float]:
+        """The estimate in parts: ``compile`` (or loading the cached kernels), ``tasks`` and ``fixed``.
+
+        ``load`` is the machine's load average before the sweep starts (default: now) and
+        ``warm`` whether numba's on-disk cache holds the kernels (default: looked up).
+        """
         tasks = self.todo if tasks is None else tasks
-        total = sum(task_cost(t) for t in tasks)
-        return total / max(1, min(self.workers, max(1, len(tasks))))
+        if not tasks:
+            return {"compile": 0.0, "tasks": 0.0, "fixed": 0.0}
+        load = current_load() if load is None else load
+        warm = numba_cache_is_warm() if warm is None else warm
+        workers = max(1, min(self.workers, len(tasks)))
+        cores = default_workers()
+        share_one = min(1.0, cores / (load + 1))  # the parent alone (compiling)
+        share_all = min(1.0, cores / (load + workers))  # every worker busy
+        start = (0.0 if warm else COMPILE_S / share_one) + WARM_START_S / share_all
+        return {"compile": start, "tasks": sum(task_cost(t) for t in tasks) / (workers * share_all),
+                "fixed": FIXED_S / share_one}
 
 
 @dataclass
@@ -76,6 +103,43 @@ def task_cost(task: Task) -> float:
 @lru_cache(maxsize=256)
 def _scenario_of(scenario_json: str) -> Scenario:
     return Scenario(**json.loads(scenario_json))
+
+
+def current_load() -> float:
+    """The 1-minute load average (runnable processes), 0 where the system does not report it."""
+    try:
+        return os.getloadavg()[0]
+    except (OSError, AttributeError):
+        return 0.0
+
+
+def numba_cache_is_warm() -> bool:
+    """Whether numba's on-disk cache holds this tanbench's kernels.
+
+    Warm when the filters' module has cache index files (``__pycache__/<module>.*.nbi``)
+    and no module's index is older than its source (numba rejects such an index and
+    compiles again). Modules whose kernels are only called from other kernels have no
+    index of their own and are not looked at (numba does not track them either).
+    """
+    cache_dir = os.environ.get("NUMBA_CACHE_DIR")
+    newest = {}
+    for source in jit_modules():
+        indexes = list((source.parent / "__pycache__").glob(f"{source.stem}.*.nbi"))
+        if cache_dir:
+            indexes += list(Path(cache_dir).rglob(f"{source.stem}.*.nbi"))
+        if indexes:
+            newest[source] = max(p.stat().st_mtime for p in indexes)
+            if newest[source] < source.stat().st_mtime:
+                return False
+    return any(source.name == "tight.py" for source in newest)
+
+
+@lru_cache(maxsize=1)
+def jit_modules() -> tuple[Path, ...]:
+    """The tanbench source files that define cached numba kernels."""
+    package = Path(__file__).resolve().parents[1]
+    return tuple(p for p in sorted(package.rglob("*.py"))
+                 if re.search(r"njit\(\s*cache\s*=\s*True", p.read_text(errors="ignore")))
 
 
 def default_workers() -> int:
@@ -132,10 +196,22 @@ def check_not_stale(sweep: Sweep, out: Path, force: bool) -> None:
             f"--force to recompute those cells, or use another --out")
 
 
+def stale_cells(sweep: Sweep, out: Path) -> list[str]:
+    """This sweep's cells with stored runs (any run index) made with other seeds than it would use."""
+    if not store.run_files(out):
+        return []
+    rows = store.stored_rows(out, {c.cell_id for c in sweep.cells})
+    if rows.empty:
+        return []
+    wide = sweep.with_runs(max(sweep.spec.runs, int(rows["run"].max()) + 1))
+    stale = store.stale_rows(out, expected_seeds(build_tasks(wide, keep_series=False)))
+    return sorted(set(stale["cell_id"])) if len(stale) else []
+
+
 def validate_worlds(sweep: Sweep) -> None:
     """Check every cell against its terrain: maps, track, sonar and initial uncertainty."""
     from tanbench.methods.api import check_start_on_map
-    from tanbench.simulation import noise_free_world
+    from tanbench.simulation import motion_plan, noise_free_world
     from tanbench.terrain import navigation_map
 
     seen = set()
@@ -144,6 +220,10 @@ def validate_worlds(sweep: Sweep) -> None:
         varied = ', '.join(f'{k}={v}' for k, v in cell.varied.items()) or 'defaults'
         label = f"{sweep.path or sweep.name}: cell {cell.cell_id} ({varied})"
         try:
+            length = motion_plan(sc).duration
+            if sc.sampling_time_s > length + 1e-9:
+                raise ValueError(f"sampling_time_s ({sc.sampling_time_s:g} s) is longer than the run "
+                                 f"({length:g} s): the filter would not update after the start")
             world = json.dumps(sc.world_spec(), sort_keys=True)
             if world not in seen:
                 noise_free_world(world)
@@ -156,12 +236,13 @@ def validate_worlds(sweep: Sweep) -> None:
             raise TanbenchError(f"{label}: {exc}") from None
 
 
-def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str = "summary") -> Plan:
-    """The tasks of ``sweep`` and which of them ``out`` already holds."""
+def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str = "summary",
+              force: bool = False) -> Plan:
+    """The tasks of ``sweep`` and which of them ``out`` already holds (none with ``force``)."""
     if series not in SERIES_MODES:
         raise TanbenchError(f"--series must be one of {', '.join(SERIES_MODES)}")
     tasks = build_tasks(sweep, keep_series=series != "none")
-    done = store.completed_tasks(out, expected_seeds(tasks)) if (out / "runs").is_dir() else set()
+    done = store.completed_tasks(out, expected_seeds(tasks)) if (out / "runs").is_dir() and not force else set()
     return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers())
 
 
@@ -180,6 +261,8 @@ def store_result(result: TaskResult, plan: Plan, columns: dict, meta: dict, full
         frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in result.series.items()]
         store.write_parquet(pd.concat(frames, ignore_index=True),
                             store.series_file(out, result.cell_id, result.run, full_series), meta)
+    # a recomputed run (--force) leaves no older series of itself under the other --series mode
+    store.series_file(out, result.cell_id, result.run, not full_series).unlink(missing_ok=True)
     rows = [{"sweep": plan.sweep.name, **columns[result.cell_id],
              **{k: v for k, v in row.items() if k != "cell_id"}} for row in result.rows]
     store.write_table(rows_table(rows), store.run_file(out, result.cell_id, result.run), meta)
@@ -197,9 +280,17 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     validate_worlds(sweep)
     check_directory_owner(sweep, out, add)
     check_not_stale(sweep, out, force)
+    # --force recomputes the tasks of this sweep (runs 0..runs-1 of its cells) and nothing
+    # else: each new result replaces its stored run when the cell is merged, and runs
+    # outside the range (e.g. runs 1-2 after `--runs 1 --force` on a 3-run sweep) are kept,
+    # unless they were made with other seeds: then the cell's stored runs are deleted, and said
     if force:
-        store.remove_cells(out, [c.cell_id for c in sweep.cells])
-    plan = make_plan(sweep, out, workers, series)
+        stale = stale_cells(sweep, out)
+        if stale:
+            echo(f"--force: deleting every stored run of {len(stale)} cell(s) whose runs were made with other "
+                 f"seeds: {', '.join(stale)}")
+            store.remove_cells(out, stale)
+    plan = make_plan(sweep, out, workers, series, force=force)
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
     store.write_text(sweep.text, out / "sweep.yaml")
     todo = plan.todo
@@ -241,9 +332,23 @@ def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progres
     from tanbench.runner.executors import open_executor
     from tanbench.terrain import file_truth_maps
 
+    from tanbench.runner.executors import warm_up
+
     columns = cell_columns(plan.sweep)
     n_methods = len(plan.sweep.spec.methods)
     workers = min(plan.workers, len(todo)) if scheduler is None else plan.workers
+    if scheduler in (None, "local-dask") and not numba_cache_is_warm():
+        # compile once here, into numba's on-disk cache, so the workers only load it (a
+        # progress bar at 0 % for a minute would look like a hang)
+        guess = plan.estimate_parts(todo, warm=False)["compile"]
+        if progress:
+            print(f"compiling the numba kernels (once per install or code change; about {guess:.0f} s on this "
+                  f"machine now)...", file=sys.stderr, flush=True)
+        started = time.perf_counter()
+        warm_up()
+        if progress:
+            print(f"compiled in {time.perf_counter() - started:.0f} s; starting {workers} worker(s)",
+                  file=sys.stderr, flush=True)
     # read here (validate_worlds did), shipped to the workers: they never read map files
     truth_maps = file_truth_maps(cell.scenario.terrain for cell in plan.sweep.cells)
     # the executor first: if it cannot start (a Dask address that does not answer), the

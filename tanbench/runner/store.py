@@ -318,6 +318,11 @@ def _alive(pid: int) -> bool:
 
 def check_writable(out: Path) -> None:
     """Create ``out`` if needed and make sure files can be written there."""
+    if out.exists() and not out.is_dir():
+        raise TanbenchError(f"output directory {out} is a file, not a directory (give --out a directory)")
+    for parent in out.parents:
+        if parent.exists() and not parent.is_dir():
+            raise TanbenchError(f"output directory {out}: {parent} is a file, not a directory")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / f".write-test.{os.getpid()}"
@@ -336,7 +341,7 @@ def check_existing_schema(out: Path) -> None:
 
 
 def remove_cells(out: Path, cell_ids) -> None:
-    """Delete every stored run and series of these cells (``--force``)."""
+    """Delete every stored run and series of these cells (``--force`` on runs made with other seeds)."""
     for cell_id in cell_ids:
         for base in (out / "runs", series_dir(out, True), series_dir(out, False)):
             shutil.rmtree(cell_dir(base, cell_id), ignore_errors=True)

@@ -19,18 +19,32 @@ from __future__ import annotations
 
 import copy
 import itertools
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 
-from tanbench.config import Scenario
+from tanbench.config import Scenario, plain_number_check
 from tanbench.errors import TanbenchError
 
 Value = Any
 DEFAULT_METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")  # the paper's, when a sweep names none
+
+
+# a name that becomes a file or directory name (results/<sweep>, tables/<table>.parquet):
+# letters, digits, '_', '-' and '.', not starting with '.' (no '', '.', '..', hidden files or '/')
+PATH_NAME = r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$"
+PATH_NAME_RULE = "letters, digits, '_', '-' and '.', not starting with '.'"
+
+
+def check_path_name(name, what: str) -> str:
+    """``name`` if it is safe as one file name component, else a ValueError naming the rule."""
+    if not isinstance(name, str) or re.fullmatch(PATH_NAME, name) is None:
+        raise ValueError(f"{what} {name!r} cannot be used as a file name (use {PATH_NAME_RULE})")
+    return name
 
 
 class SweepSpec(BaseModel):
@@ -38,7 +52,7 @@ class SweepSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")
+    name: str
     description: str = ""
     seed: int = Field(ge=0)
     runs: int = Field(gt=0, le=100_000)
@@ -46,6 +60,25 @@ class SweepSpec(BaseModel):
     scenario: dict[str, Any] = Field(default_factory=dict)
     tables: dict[str, dict[str, list[Value]]] = Field(default_factory=dict)
     grid: dict[str, list[Value]] | None = None
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _plain_numbers(cls, value, info: ValidationInfo):
+        return plain_number_check(cls, value, info.field_name)
+
+    @field_validator("name")
+    @classmethod
+    def _name_is_a_path_name(cls, v):
+        return check_path_name(v, "sweep name")
+
+    @field_validator("tables")
+    @classmethod
+    def _table_names_are_path_names(cls, v):
+        for table in v:
+            check_path_name(table, "table name")
+            if table == "grid":
+                raise ValueError("table name 'grid' is taken by the grid design's table")
+        return v
 
     @field_validator("methods")
     @classmethod
@@ -114,10 +147,31 @@ def load_results_sweep(directory) -> Sweep:
     return load_sweep(path)
 
 
+class UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (YAML would keep the last)."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            seen = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = seen.setdefault(key, key_node.start_mark.line)
+                except TypeError:  # an unhashable key: the base class says so
+                    continue
+                if first != key_node.start_mark.line:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"duplicate key {key!r} (first given at line {first + 1})",
+                        key_node.start_mark)
+        return super().construct_mapping(node, deep=deep)
+
+
 def parse_sweep(text: str, label: str = "<sweep>", path: Path | None = None) -> Sweep:
     """Validate sweep YAML ``text``; ``label`` names it in error messages."""
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
