@@ -225,13 +225,20 @@ def read_dataset(directory: Path) -> pd.DataFrame:
     """A Hive-partitioned tree of our files as one frame, ``cell_id`` as a string column.
 
     The same as ``pd.read_parquet(directory)``, except that the partition column is typed
-    as a string explicitly (pandas' inference would turn an all-digit id into a number).
+    as a string explicitly (pandas' inference would turn an all-digit id into a number),
+    and that the files' schemas are unified: runs stored before an option existed lack
+    its column, which then reads as null for them instead of being dropped for all.
     """
     import pyarrow.dataset as ds
 
+    partitioning = ds.partitioning(pa.schema([(PARTITION, pa.string())]), flavor="hive")
     try:
-        dataset = ds.dataset(directory, format="parquet",
-                             partitioning=ds.partitioning(pa.schema([(PARTITION, pa.string())]), flavor="hive"))
+        dataset = ds.dataset(directory, format="parquet", partitioning=partitioning)
+        schemas = [f.physical_schema for f in dataset.get_fragments()]
+        if schemas:
+            unified = pa.unify_schemas([sc.remove_metadata() for sc in schemas] +
+                                       [pa.schema([(PARTITION, pa.string())])], promote_options="default")
+            dataset = ds.dataset(directory, format="parquet", partitioning=partitioning, schema=unified)
         return dataset.to_table().to_pandas()
     except (OSError, pa.ArrowException) as exc:
         raise TanbenchError(f"{directory}: cannot read the results ({str(exc).splitlines()[0]})") from None
