@@ -128,3 +128,29 @@ def test_another_sweep_into_the_same_directory_is_refused_unless_added(stored):
     assert yaml.safe_load((Path(out) / "sweep.yaml").read_text())["name"] == "tiny"
     added = cli("run", path, "--out", out, "--workers", 1, "-q", "--add")
     assert added.returncode == 0, added.stderr
+
+
+def test_an_edited_map_file_is_noticed_on_resume(tmp_path):
+    """The runs of a file terrain carry its content hash: after editing the file they are not reused."""
+    import numpy as np
+
+    ee, nn = np.meshgrid(np.arange(0, 1001, 10.0), np.arange(0, 1001, 10.0))
+    relief = -80.0 + 8 * np.sin(ee / 60.0) * np.cos(nn / 45.0)
+    np.save(tmp_path / "map.npy", relief)
+    data = sweep_dict(runs=1, methods=["tight-dvl"], tables={}, scenario={
+        "area": "custom", "particles": 60, "duration_s": 60,
+        "terrain": {"kind": "file", "path": str(tmp_path / "map.npy"), "origin": [0, 0], "resolution": 10.0},
+        "trajectory": {"kind": "survey", "centre_en_m": [500, 500], "heading_deg": 0, "leg_length_m": 300,
+                       "leg_spacing_m": 100, "legs": 2, "depth_m": 20}})
+    path = write_sweep(tmp_path / "s.yaml", data)
+    out = tmp_path / "out"
+    assert cli("run", path, "--out", out, "--workers", 1, "-q").returncode == 0
+    np.save(tmp_path / "map.npy", relief + 0.5)  # the same grid, re-surveyed
+    proc = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert proc.returncode == 2
+    lines = error_lines(proc.stderr)
+    assert len(lines) == 1 and "map files whose content has changed" in lines[0], proc.stderr
+    forced = cli("run", path, "--out", out, "--workers", 1, "-q", "--force")
+    assert forced.returncode == 0, forced.stderr
+    again = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert again.returncode == 0 and "0 tasks (0 runs) run" in again.stdout, again.stdout

@@ -51,6 +51,7 @@ class Plan:
     tasks: list[Task]
     done: set
     workers: int
+    terrain_hashes: dict = field(default_factory=dict)  # cell -> map files' content hash
 
     @property
     def todo(self) -> list[Task]:
@@ -183,10 +184,36 @@ def check_directory_owner(sweep: Sweep, out: Path, add: bool) -> None:
                             f"or --add to add this sweep's cells to it")
 
 
+def terrain_hashes(sweep: Sweep) -> dict[str, str]:
+    """Per cell with a file terrain: the content hash of its map files (stored with its runs)."""
+    from tanbench.terrain.files import terrain_content_hash
+
+    out = {}
+    for cell in sweep.cells:
+        digest = terrain_content_hash(cell.scenario.terrain)
+        if digest is not None:
+            out[cell.cell_id] = digest
+    return out
+
+
+def changed_map_cells(sweep: Sweep, out: Path) -> list[str]:
+    """Cells whose stored runs were made from map files with other content than today's."""
+    current = terrain_hashes(sweep)
+    stored = store.stored_terrain_hashes(out, current)
+    return sorted(cell for cell, hashes in stored.items() if hashes - {current[cell]})
+
+
 def check_not_stale(sweep: Sweep, out: Path, force: bool) -> None:
-    """Refuse to mix stored runs that this sweep would compute differently (another root seed)."""
+    """Refuse to mix stored runs that this sweep would compute differently (another root seed,
+    edited map files)."""
     if force or not store.run_files(out):
         return
+    edited = changed_map_cells(sweep, out)
+    if edited:
+        raise TanbenchError(
+            f"{out} holds runs of {len(edited)} of this sweep's cells made from map files whose content has "
+            f"changed since ({', '.join(edited)}); they would come out differently now: rerun with --force "
+            f"to recompute those cells, or use another --out")
     stale = store.stale_rows(out, expected_seeds(build_tasks(sweep, keep_series=False)))
     if len(stale):
         cells = stale["cell_id"].nunique()
@@ -205,7 +232,7 @@ def stale_cells(sweep: Sweep, out: Path) -> list[str]:
         return []
     wide = sweep.with_runs(max(sweep.spec.runs, int(rows["run"].max()) + 1))
     stale = store.stale_rows(out, expected_seeds(build_tasks(wide, keep_series=False)))
-    return sorted(set(stale["cell_id"])) if len(stale) else []
+    return sorted(set(stale["cell_id"]) | set(changed_map_cells(sweep, out)))
 
 
 def validate_worlds(sweep: Sweep) -> None:
@@ -243,7 +270,8 @@ def make_plan(sweep: Sweep, out: Path, workers: int | None = None, series: str =
         raise TanbenchError(f"--series must be one of {', '.join(SERIES_MODES)}")
     tasks = build_tasks(sweep, keep_series=series != "none")
     done = store.completed_tasks(out, expected_seeds(tasks)) if (out / "runs").is_dir() and not force else set()
-    return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers())
+    return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers(),
+                terrain_hashes=terrain_hashes(sweep))
 
 
 def cell_columns(sweep: Sweep) -> dict[str, dict]:
@@ -255,8 +283,11 @@ def cell_columns(sweep: Sweep) -> dict[str, dict]:
 
 
 def store_result(result: TaskResult, plan: Plan, columns: dict, meta: dict, full_series: bool) -> None:
-    """Write a finished task's rows (and series) atomically."""
+    """Write a finished task's rows (and series) atomically; a file terrain's content hash
+    goes into the metadata (``terrain_sha256``), for resume to notice edited maps."""
     out = plan.out
+    if result.cell_id in plan.terrain_hashes:
+        meta = {**meta, "terrain_sha256": plan.terrain_hashes[result.cell_id]}
     if result.series:
         frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in result.series.items()]
         store.write_parquet(pd.concat(frames, ignore_index=True),

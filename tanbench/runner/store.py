@@ -262,6 +262,22 @@ def stored_rows(out: Path, cell_ids=None) -> pd.DataFrame:
     return df.drop_duplicates(subset=["cell_id", "method", "run"], keep="last")
 
 
+def stored_terrain_hashes(out: Path, cell_ids) -> dict[str, set]:
+    """Per cell: the map-content hashes (``terrain_sha256``) its stored run files carry.
+
+    Runs stored before tanbench recorded the hash carry none and are not in the sets.
+    """
+    wanted = set(cell_ids)
+    out_hashes: dict[str, set] = {}
+    for path in run_files(out):
+        cell = cell_of(path)
+        if cell in wanted:
+            digest = read_meta(path).get("terrain_sha256")
+            if digest is not None:
+                out_hashes.setdefault(cell, set()).add(digest)
+    return out_hashes
+
+
 def completed_tasks(out: Path, expected: dict) -> set[tuple[str, int]]:
     """(cell_id, run) of the tasks stored exactly as they would be computed now.
 
