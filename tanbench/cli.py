@@ -341,10 +341,15 @@ def check(
     margin_abs: float = typer.Option(1.0, "--margin-abs", min=0.0, help="Absolute margin, metres."),
     alpha: float = typer.Option(0.05, "--alpha", min=1e-9, max=0.5, help="Level after Holm's correction."),
     report: Optional[Path] = typer.Option(None, "--report", help="Also write the table (.md, .json or .parquet)."),
+    nees: bool = typer.Option(False, "--nees", help="Also regress on consistency: the fraction of updates whose "
+                              "NEES lies outside its 95 % chi-square bounds."),
+    nees_margin: float = typer.Option(0.05, "--nees-margin", min=0.0, max=1.0,
+                                      help="Absolute margin of the NEES metric (a fraction of updates)."),
 ):
     from tanbench.check import CheckOptions, compare, render, write_report
 
-    result = compare(new, baseline, CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha))
+    result = compare(new, baseline, CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha,
+                                                 nees=nees, nees_margin_abs=nees_margin))
     typer.echo(render(result))
     if report is not None:
         write_report(result, report)
