@@ -380,6 +380,22 @@ def report(
     typer.echo(f"wrote {path}")
 
 
+@app.command(help="Prediction checked against outcome: Spearman rank correlations of the terrain suitability "
+             "and the PCRB with each method's errors over results directories; a table and a scatter figure."
+             + EXAMPLE.format("tanbench predict results/zhou2017 results/monterey --out results/prediction"))
+def predict(
+    directories: list[Path] = typer.Argument(..., help="Results directories."),
+    out: Path = typer.Option(Path("results") / "prediction", "--out", "-o", help="Output directory."),
+):
+    from tanbench.prediction import write_prediction
+    from tanbench.results import to_markdown
+
+    cells, corr = write_prediction(directories, out)
+    typer.echo(to_markdown(corr[corr["outcome"] == "mean_time_avg_error_m"],
+                           title=f"Spearman rho over {len(cells)} (cell, method) pairs"))
+    typer.echo(f"wrote {out / 'prediction.md'}, {out / 'prediction.parquet'}, {out / 'prediction.png'}")
+
+
 @app.command(help="Benchmark the tight-dvl filter (ns per particle-step, run time, numpy ratio)."
              + EXAMPLE.format("tanbench bench --json"))
 def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON object.")):

@@ -277,6 +277,6 @@ def to_markdown(df: pd.DataFrame, title: str | None = None) -> str:
     lines.append("| " + " | ".join(cols) + " |")
     lines.append("|" + "|".join("---" for _ in cols) + "|")
     for _, row in df.iterrows():
-        lines.append("| " + " | ".join(_fmt_ratio(row[c]) if c.startswith("ratio") else _fmt(row[c])
+        lines.append("| " + " | ".join(_fmt_ratio(row[c]) if c.startswith("ratio") or c.endswith(("_rho", "_ratio")) else _fmt(row[c])
                                        for c in cols) + " |")
     return "\n".join(lines) + "\n"

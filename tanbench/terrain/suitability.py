@@ -3,13 +3,15 @@
 Per node of a navigation map, four measures (docs/model.md, section 9.3):
 
 * **predicted position std after N pings** (``predicted_std_m``): the Fisher information
-  of one ping of the sensor (``bounds.pcrb.ping_information``: beam geometry, the
+  J_ping of one ping of the sensor (``bounds.pcrb.ping_information``: beam geometry, the
   map's gradient at the footprints, range noise of std ``noise_m / sqrt(3)``) with the
   vehicle level at ``altitude_m`` above the node, averaged over headings (0, 22.5, 45
-  and 67.5 deg: with the Janus DVL's 90-deg symmetry, every 22.5 deg); then
-  ``sqrt(trace((J_prior + N J_ping)^-1))`` with the filter's initial square as the prior
-  (variance side^2 / 12 per axis). Small is good; a flat node keeps the prior's std.
-  ``information_per_ping`` is ``trace(J_ping)`` (1/m^2).
+  and 67.5 deg: with the Janus DVL's 90-deg symmetry, every 22.5 deg); the N pings are
+  spread over the window around the node (the vehicle moves; one nadir beam alone would
+  only ever see one gradient direction), so J_ping is averaged over the window; then
+  ``sqrt(trace((J_prior + N mean J_ping)^-1))`` with the filter's initial square as the
+  prior (variance side^2 / 12 per axis). Small is good; a flat node keeps the prior's
+  std. ``information_per_ping`` is ``trace(J_ping)`` at the node (1/m^2).
 * **slope std** (``slope_std_deg``): the standard deviation of the slope angle over a
   square window of side ``window_m`` (default 50 m, about the DVL footprint spread at
   30 m altitude);
@@ -223,9 +225,13 @@ def suitability(grid: Map, beams_body: np.ndarray, altitude_m: float, range_std_
                 initial_area_m: float, window_m: float = 50.0, sensor: str = "dvl") -> Suitability:
     """Every measure of the module docstring on ``grid``'s nodes."""
     info = ping_information_grid(grid, beams_body, altitude_m, range_std_m)
-    rough, ent = window_stats(grid.z, *_window_nodes(grid, window_m))
+    size = _window_nodes(grid, window_m)
+    # the N pings are spread over the window around the node (the vehicle moves): mean J_ping there
+    spread = np.stack([np.stack([_nan_box_mean(info[..., i, j], size) for j in range(2)], -1) for i in range(2)], -2)
+    spread[np.isnan(grid.z)] = np.nan
+    rough, ent = window_stats(grid.z, *size)
     layers = {
-        "predicted_std_m": predicted_std(info, pings, initial_area_m**2 / 12.0),
+        "predicted_std_m": predicted_std(spread, pings, initial_area_m**2 / 12.0),
         "information_per_ping": info[..., 0, 0] + info[..., 1, 1],
         "slope_std_deg": slope_std(grid, window_m),
         "roughness_m": rough,
