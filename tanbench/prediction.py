@@ -35,7 +35,7 @@ OUTCOMES = ("mean_time_avg_error_m", "mean_final_error_m")
 
 def cell_table(directory) -> pd.DataFrame:
     """Predictors and outcomes of every (cell, method) with successful runs in ``directory``."""
-    from tanbench.bounds.pcrb import METHOD_BOUNDS, method_bound
+    from tanbench.bounds.pcrb import method_bound, method_bound_spec
     from tanbench.results import load, summarize
     from tanbench.runner.sweep import load_results_sweep
 
@@ -48,9 +48,10 @@ def cell_table(directory) -> pd.DataFrame:
     for cell in sweep.cells:
         sc = cell.scenario
         for method in sweep.spec.methods:
-            if (cell.cell_id, method) not in summary.index or method not in METHOD_BOUNDS:
+            spec = method_bound_spec(method) if (cell.cell_id, method) in summary.index else None
+            if spec is None:
                 continue
-            sensor = METHOD_BOUNDS[method][0]
+            sensor = spec[0]
             key = json.dumps([sc.world_key(), sc.map_resolution_m, sc.noise_m, sc.filter.initial_area_m, sensor])
             if key not in cache:
                 cache[key] = _track_suitability(sc, sensor)

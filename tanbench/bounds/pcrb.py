@@ -58,8 +58,6 @@ from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 STATE_SETS = {"position": ("E", "N"), "full": ("E", "N", "psi", "eps_x", "eps_z")}
 
-# which sonar and which state each built-in method's bound uses
-METHOD_BOUNDS = {"tight-dvl": ("dvl", "full"), "tight-sbe": ("sbe", "full"), "loose-dvl": ("dvl", "position")}
 
 # the per-update columns of a bound (what ``bound_frame`` returns besides t)
 BOUND_COLUMNS = ("pcrb_e_m", "pcrb_n_m", "pcrb_horizontal_m", "pcrb_heading_deg")
@@ -109,18 +107,24 @@ class BoundModel:
         return j
 
 
-def model_for(scenario, method: str) -> BoundModel:
-    """The bound model of a built-in method in ``scenario`` (its filter settings)."""
+def method_bound_spec(method: str) -> tuple[str, str] | None:
+    """(sensor, states) of a method's bound, from its registry record (None: no bound)."""
+    from tanbench.methods import get
+
+    return get(method).bound
+
+
+def model_for(scenario, states: str) -> BoundModel:
+    """The bound model for ``states`` ("full": the tight filter's, "position": the loose one's) in ``scenario``."""
     from tanbench.filters.propagate import position_noise
-    from tanbench.filters.run import DIST_MODES
+    from tanbench.options import DISTANCE_INNOVATION
     from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
 
     f = scenario.filter
     T = scenario.sampling_time_s
-    _, states = METHOD_BOUNDS[method]
     q = f.process_noise_velocity_mps * T
     if states == "full":
-        sig_pos = position_noise(q, f.measurement_noise_distance_m, DIST_MODES[f.distance_innovation])
+        sig_pos = position_noise(q, f.measurement_noise_distance_m, DISTANCE_INNOVATION[f.distance_innovation])
         cross = 0.0
     else:
         sig_pos = q
@@ -252,20 +256,20 @@ def true_tracks(scenario, sensor: str) -> tuple[list[TrueTrack], np.ndarray]:
 
 
 def method_bound(scenario, method: str) -> pd.DataFrame | None:
-    """The PCRB series (t, ``BOUND_COLUMNS``) of a built-in method in ``scenario``; None for others."""
-    if method not in METHOD_BOUNDS:
+    """The PCRB series (t, ``BOUND_COLUMNS``) of ``method`` in ``scenario``; None if its record has no bound."""
+    spec = method_bound_spec(method)
+    if spec is None:
         return None
-    return _method_bound_cached(json.dumps(scenario.normalized(), sort_keys=True), method).copy()
+    return _bound_cached(json.dumps(scenario.normalized(), sort_keys=True), *spec).copy()
 
 
 @lru_cache(maxsize=32)
-def _method_bound_cached(scenario_json: str, method: str) -> pd.DataFrame:
+def _bound_cached(scenario_json: str, sensor: str, states: str) -> pd.DataFrame:
     from tanbench.config import Scenario
     from tanbench.terrain import navigation_map
 
     scenario = Scenario(**json.loads(scenario_json))
-    sensor, _ = METHOD_BOUNDS[method]
     tracks, beams = true_tracks(scenario, sensor)
     nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
-    P = bound(tracks, beams, nmap, model_for(scenario, method))
+    P = bound(tracks, beams, nmap, model_for(scenario, states))
     return bound_frame(tracks[0].t, P)

@@ -1,7 +1,8 @@
 """Filter consistency: the normalised estimation error squared (NEES) of the horizontal position.
 
 At each update a method reports its horizontal covariance P (``var_e``, ``var_n`` and,
-if it reports one, ``cov_en``; without it P is taken as diagonal). With the error
+if it reports one, ``cov_en``; without it, or where it is NaN, P is taken as diagonal).
+With the error
 e = estimate - truth,
 
     NEES_k = e_k^T P_k^{-1} e_k,
@@ -31,14 +32,13 @@ from scipy import stats
 NEES_DOF = 2
 LEVEL = 0.95
 VERDICT_FRACTION = 0.25
-RUN_COLUMNS = ("nees_mean_after_convergence", "nees_above_95", "nees_below_95")
 
 
 def nees(err_e, err_n, var_e, var_n, cov_en=None) -> np.ndarray:
     """Per-update NEES of the horizontal error; NaN where the covariance is not positive definite."""
     err_e, err_n = np.asarray(err_e, float), np.asarray(err_n, float)
     var_e, var_n = np.asarray(var_e, float), np.asarray(var_n, float)
-    c = np.zeros_like(var_e) if cov_en is None else np.asarray(cov_en, float)
+    c = np.zeros_like(var_e) if cov_en is None else np.nan_to_num(np.asarray(cov_en, float), nan=0.0)
     det = var_e * var_n - c * c
     with np.errstate(divide="ignore", invalid="ignore"):
         out = (var_n * err_e**2 - 2 * c * err_e * err_n + var_e * err_n**2) / det

@@ -3,12 +3,14 @@
 Scoring (which alone reads the truth) calls :func:`score_consistency_and_bound` with the
 run's errors and the method's reported covariance; it returns
 
-* metrics (``METRIC_COLUMNS``): the NEES summaries of ``metrics.consistency.run_summary``;
-  ``pcrb_after_convergence_m``, the RMS of the cell's PCRB (``bounds.pcrb``) over the
-  updates after the run's convergence, and ``rmse_pcrb_ratio``, the run's RMSE after
-  convergence divided by it (NaN if the run never converged or the method has no bound);
-* series (``SERIES_COLUMNS``): per-update ``nees``, ``pcrb_horizontal_m`` and
-  ``pcrb_heading_deg``.
+* metrics: the NEES summaries of :func:`tanbench.metrics.consistency.run_summary`;
+  ``pcrb_after_convergence_m``, the RMS of the cell's PCRB (:mod:`tanbench.bounds.pcrb`)
+  over the updates after the run's convergence, and ``rmse_pcrb_ratio``, the run's RMSE
+  after convergence divided by it (NaN if the run never converged or the method has no
+  bound);
+* series: per-update ``nees``, ``pcrb_horizontal_m`` and ``pcrb_heading_deg``.
+
+Their names and types are declared in :mod:`tanbench.schema`.
 """
 
 from __future__ import annotations
@@ -16,18 +18,15 @@ from __future__ import annotations
 import numpy as np
 
 from tanbench.bounds.pcrb import method_bound
-from tanbench.metrics.consistency import RUN_COLUMNS, nees, run_summary
-
-METRIC_COLUMNS = RUN_COLUMNS + ("pcrb_after_convergence_m", "rmse_pcrb_ratio")
-SERIES_COLUMNS = ("nees", "pcrb_horizontal_m", "pcrb_heading_deg")
+from tanbench.metrics.consistency import nees, run_summary
 
 
-def score_consistency_and_bound(scenario, method: str, t: np.ndarray, err_e, err_n, var_e, var_n, cov_en,
+def score_consistency_and_bound(scenario, method: str | None, t: np.ndarray, err_e, err_n, var_e, var_n, cov_en,
                                 convergence_time_s: float, rmse_after_convergence_m: float) -> tuple[dict, dict]:
     """(metrics, series) of the module docstring for one run."""
     values = nees(err_e, err_n, var_e, var_n, cov_en)
     metrics = run_summary(t, values, convergence_time_s)
-    bound = method_bound(scenario, method)
+    bound = method_bound(scenario, method) if method is not None else None
     nan = np.full(t.size, np.nan)
     if bound is None or bound["t"].size != t.size:
         pcrb_h, pcrb_psi = nan, nan
