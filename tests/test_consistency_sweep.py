@@ -82,3 +82,14 @@ def test_check_regresses_on_nees(results, tmp_path):
     assert (t[t["metric"] != "nees"]["verdict"] == "unchanged").all()
     assert result.regressed and set(t[t["verdict"] == "regressed"]["metric"]) == {"nees"}
     assert not compare(worse, results).regressed  # without --nees the errors alone did not change
+
+
+def test_report_section_shows_the_ratio(results):
+    from tanbench.report import efficiency_section
+
+    table = pd.read_parquet(results / "tables" / "noise_model.parquet")
+    text = efficiency_section({"table3": table})
+    row = table[table["filter.measurement_noise_altitude_m"] == 1.0].iloc[0]
+    assert f"{row['rmse_pcrb_ratio']:.2f} times the bound" in text
+    assert "over-confident" in text and "consistent" in text
+    assert efficiency_section({"table3": table.drop(columns=["rmse_pcrb_ratio"])}) == ""
