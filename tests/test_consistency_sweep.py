@@ -93,3 +93,11 @@ def test_report_section_shows_the_ratio(results):
     assert f"{row['rmse_pcrb_ratio']:.2f} times the bound" in text
     assert "over-confident" in text and "consistent" in text
     assert efficiency_section({"table3": table.drop(columns=["rmse_pcrb_ratio"])}) == ""
+
+
+def test_plot_draws_the_bound_and_nees(results):
+    pytest.importorskip("matplotlib")
+    from tanbench.plot import plot_results
+
+    written = plot_results(results)
+    assert any(p.name.endswith("_bound_nees.png") and p.stat().st_size > 0 for p in written)
