@@ -94,7 +94,7 @@ def run(
 
 def _compact(table):
     keep = [c for c in table.columns if c not in ("ci95_low_m", "ci95_high_m", "min_time_avg_error_m",
-                                                   "max_time_avg_error_m", "std_final_error_m")]
+                                                   "max_time_avg_error_m", "std_final_error_m", "nees_below_95")]
     return table[keep]
 
 

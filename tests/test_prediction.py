@@ -39,3 +39,14 @@ def test_cell_table_of_the_ci_baseline(monkeypatch):
     # fewer updates (5 s sampling) on the same map: the same suitability, a larger bound
     assert dvl.loc[(10.0, 5.0), "suitability_std_m"] == dvl.loc[(10.0, 1.0), "suitability_std_m"]
     assert dvl.loc[(10.0, 5.0), "pcrb_mean_m"] > dvl.loc[(10.0, 1.0), "pcrb_mean_m"]
+
+
+def test_predict_bad_input_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-m", "tanbench.cli", "predict", str(tmp_path / "missing"),
+                          "--out", str(tmp_path / "out")], capture_output=True, text=True, cwd=ROOT)
+    assert res.returncode == 2
+    assert res.stderr.startswith("error: ") and res.stderr.count("\n") == 1
+    assert not (tmp_path / "out").exists()
