@@ -148,8 +148,6 @@ def test_transition_matches_brute_force_propagation():
     from tanbench.filters.propagate import DIST_NONE, propagate_tight_numpy
     from tanbench.filters.state import N_TIGHT
 
-    grid = plane_map()
-    beams = altimeter_beam_vectors()
     rate = 100.0
     n_samples = 1001
     t = np.arange(n_samples) / rate
@@ -174,7 +172,6 @@ def test_transition_matches_brute_force_propagation():
         ym, _ = propagate_tight_numpy(xm, inc[0], yaw[0], np.zeros((1, 6)), 0, 0, 0, DIST_NONE)
         fd = (yp[0, [0, 1, 5]] - ym[0, [0, 1, 5]]) / (2 * h)
         np.testing.assert_allclose(F[0, :3, s], fd, rtol=1e-5, atol=1e-9)
-    del grid, beams
 
 
 def test_off_map_footprints_carry_no_information():
