@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline clean
+.PHONY: run test bench paper baseline predict clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,13 @@ paper: $(VENV)/.installed-run
 	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --force --quiet
 	$(TB) plot results/zhou2017
 	$(TB) report results/zhou2017
+
+## predict: terrain suitability maps (results/suitability) and prediction vs outcome over the committed
+## sweeps (results/prediction: Spearman correlations of suitability and PCRB with the errors, scatter figure)
+predict: $(VENV)/.installed-run
+	$(TB) terrain suitability configs/zhou2017.yaml --out results/suitability --track
+	$(TB) terrain suitability configs/monterey.yaml --out results/suitability --track
+	$(TB) predict results/zhou2017 results/monterey --out results/prediction
 
 ## bench: speed figures of the tight-dvl filter (printed, never asserted)
 bench: $(VENV)/.installed-run

@@ -20,6 +20,11 @@ Missing data is a failure too: a cell, a method of a matched cell, or a (success
 of a matched cell and method found in only one of the directories is listed in
 ``missing`` and makes ``tanbench check`` exit 1 (``--allow-missing`` compares what the
 two share and only reports the rest).
+With ``nees`` (``tanbench check --nees``) a third metric joins: the per-run fraction of
+updates whose NEES lies outside its one-run 95 % chi-square bounds
+(``nees_above_95 + nees_below_95``, nominally 0.05; docs/model.md, section 9.2), with its
+own absolute margin ``nees_margin_abs`` (a fraction, default 0.05): a filter whose
+reported covariance stops describing its errors regresses even if its errors do not.
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from tanbench.results import TABLE_SCENARIO_COLUMNS
 from tanbench.schema import RESULT_COLUMNS
 
 METRICS = {"final": "final_horizontal_error_m", "time-avg": "mean_horizontal_error_m"}
+NEES_METRIC = ("nees", "nees_outside_95")
 
 
 @dataclass
@@ -46,6 +52,8 @@ class CheckOptions:
     alpha: float = 0.05
     bootstrap: int = 2000
     seed: int = 0
+    nees: bool = False
+    nees_margin_abs: float = 0.05
 
 
 @dataclass
@@ -81,18 +89,23 @@ def holm(p: np.ndarray) -> np.ndarray:
     return adj
 
 
-def _load(directory) -> pd.DataFrame:
+def _load(directory, nees: bool = False) -> pd.DataFrame:
     from tanbench.results import load
 
     runs = load(directory)
     missing = [c for c in ("method", "run", "seed", "status", *METRICS.values()) if c not in runs.columns]
     if missing:
         raise TanbenchError(f"{directory}: results lack column(s) {', '.join(missing)}; not comparable")
+    if nees:
+        if "nees_above_95" not in runs.columns:
+            raise TanbenchError(f"{directory}: results have no NEES columns (written before tanbench stored "
+                                f"them); rerun the sweep or drop --nees")
+        runs = runs.assign(**{NEES_METRIC[1]: runs["nees_above_95"] + runs["nees_below_95"]})
     return runs[runs["status"] == "ok"]
 
 
 def _scenario_columns(a: pd.DataFrame, b: pd.DataFrame) -> list[str]:
-    return sorted((set(a.columns) & set(b.columns)) - RESULT_COLUMNS)
+    return sorted((set(a.columns) & set(b.columns)) - RESULT_COLUMNS - {NEES_METRIC[1]})
 
 
 def _cell_keys(runs: pd.DataFrame, cols: list[str]) -> pd.Series:
@@ -137,7 +150,8 @@ def _one_sided(x: np.ndarray, y: np.ndarray, shift: float, paired: bool) -> floa
 def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResult:
     """Compare two results directories; see the module docstring."""
     opt = options or CheckOptions()
-    new, base = _load(new_dir), _load(base_dir)
+    new, base = _load(new_dir, opt.nees), _load(base_dir, opt.nees)
+    metrics = {**METRICS, **(dict([NEES_METRIC]) if opt.nees else {})}
     cols = _scenario_columns(new, base)
     if not cols:
         raise TanbenchError(f"{new_dir} and {base_dir} share no scenario columns; not comparable")
@@ -165,12 +179,20 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResu
                     missing_runs.append(f"{_runs_text(extra)} of {method} only in {side} (ok runs): cell {cell}")
             common = nm.index.intersection(bm.index)
             paired = len(common) >= 5 and bool((nm.loc[common, "seed"] == bm.loc[common, "seed"]).all())
-            for metric, column in METRICS.items():
+            for metric, column in metrics.items():
                 if paired:
                     x, y = nm.loc[common, column].to_numpy(float), bm.loc[common, column].to_numpy(float)
                 else:
                     x, y = nm[column].to_numpy(float), bm[column].to_numpy(float)
-                delta = max(opt.margin_rel * float(np.mean(y)), opt.margin_abs)
+                if paired:  # NaN metrics (a run without a covariance) are left out
+                    keep = np.isfinite(x) & np.isfinite(y)
+                    x, y = x[keep], y[keep]
+                else:
+                    x, y = x[np.isfinite(x)], y[np.isfinite(y)]
+                if x.size == 0 or y.size == 0:
+                    continue
+                margin_abs = opt.nees_margin_abs if metric == NEES_METRIC[0] else opt.margin_abs
+                delta = max(opt.margin_rel * float(np.mean(y)), margin_abs)
                 lo, hi = _bootstrap_diff(x, y, paired, opt.bootstrap, rng)
                 rows.append({
                     "cell_id": nm["cell_id"].iloc[0], "cell": _label(nm.iloc[0]), "method": method,

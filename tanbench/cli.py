@@ -103,7 +103,7 @@ def run(
 
 def _compact(table):
     keep = [c for c in table.columns if c not in ("ci95_low_m", "ci95_high_m", "min_time_avg_error_m",
-                                                   "max_time_avg_error_m", "std_final_error_m")]
+                                                   "max_time_avg_error_m", "std_final_error_m", "nees_below_95")]
     return table[keep]
 
 
@@ -338,6 +338,56 @@ def terrain_stats(
             typer.echo(line)
 
 
+@terrain_app.command("suitability", help="Per-node TAN suitability of a map (predicted position std after N "
+                     "pings, slope std, roughness, terrain entropy) as GeoTIFF and PNG with the tracks drawn."
+                     + EXAMPLE.format("tanbench terrain suitability configs/zhou2017.yaml --track"))
+def terrain_suitability(
+    target: Path = typer.Argument(..., help="A bathymetry file (the map as it is) or a sweep YAML."),
+    sensor: str = typer.Option("dvl", "--sensor", help="dvl (4 Janus beams) or sbe (one nadir beam)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output directory [default: results/suitability]."),
+    pings: int = typer.Option(10, "--pings", min=1, help="Pings of the predicted position std."),
+    track: bool = typer.Option(False, "--track", help="Print the measures' means along the sweep's tracks."),
+    altitude: Optional[float] = typer.Option(None, "--altitude", min=0.1,
+                                             help="Altitude above the seafloor, m [default: the tracks' median, "
+                                                  "or 30 m for a map file]."),
+    noise: Optional[float] = typer.Option(None, "--noise", min=0.0,
+                                          help="Range-noise half-width, m [default: the sweep's, or 1 m]."),
+    window: float = typer.Option(50.0, "--window", min=1.0, help="Window side of the classical measures, m."),
+):
+    import pandas as pd
+
+    from tanbench.results import to_markdown
+    from tanbench.terrain.suitability import (MEASURES, plot_suitability, sensor_beams, sources_from, suitability,
+                                              track_summary, write_geotiff)
+
+    if sensor not in ("dvl", "sbe"):
+        raise TanbenchError(f"--sensor must be dvl or sbe, not {sensor!r}")
+    sources = sources_from(target, altitude, noise)
+    if track and not any(s.tracks for s in sources):
+        raise TanbenchError(f"{target}: --track needs a sweep file (a map file has no tracks)")
+    if any(s.noise_m <= 0 for s in sources):
+        raise TanbenchError("the range noise is zero: a ping's information is unbounded; give --noise > 0")
+    out = out or Path("results") / "suitability"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TanbenchError(f"cannot create {out}: {exc.strerror or exc}") from None
+    rows = []
+    for src in sources:
+        result = suitability(src.grid, sensor_beams(sensor), src.altitude_m, src.noise_m / 3 ** 0.5, pings,
+                             src.initial_area_m, window, sensor)
+        stem = f"{src.label}-{sensor}"
+        for name in MEASURES:
+            write_geotiff(result.layers[name], src.grid, out / f"{stem}-{name}.tif")
+        plot_suitability(result, src.tracks, out / f"{stem}.png")
+        typer.echo(f"{src.label}: {src.grid.shape[1]} x {src.grid.shape[0]} nodes, {sensor} at "
+                   f"{src.altitude_m:.1f} m altitude; wrote {out / stem}.png and {len(MEASURES)} GeoTIFFs")
+        if track:
+            rows += [{"map": src.label, **r} for r in track_summary(result, src.tracks)]
+    if track:
+        typer.echo(to_markdown(pd.DataFrame(rows), title=f"suitability along the tracks ({sensor}, {pings} pings)"))
+
+
 @app.command(help="Compare two results directories: did NEW's error statistics regress from BASELINE? "
              "Exit 0 nothing regressed, 1 something did or a cell, method or run is missing on either side, "
              "2 bad input."
@@ -352,10 +402,15 @@ def check(
     allow_missing: bool = typer.Option(False, "--allow-missing",
                                        help="Pass even if cells, methods or runs are in only one directory "
                                             "(they are still listed)."),
+    nees: bool = typer.Option(False, "--nees", help="Also regress on consistency: the fraction of updates whose "
+                              "NEES lies outside its 95 % chi-square bounds."),
+    nees_margin: float = typer.Option(0.05, "--nees-margin", min=0.0, max=1.0,
+                                      help="Absolute margin of the NEES metric (a fraction of updates)."),
 ):
     from tanbench.check import CheckOptions, compare, render, write_report
 
-    result = compare(new, baseline, CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha))
+    result = compare(new, baseline, CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha,
+                                                 nees=nees, nees_margin_abs=nees_margin))
     typer.echo(render(result))
     if report is not None:
         write_report(result, report)
@@ -393,6 +448,22 @@ def report(
 
     path = write_report(directory, discussion)
     typer.echo(f"wrote {path}")
+
+
+@app.command(help="Prediction checked against outcome: Spearman rank correlations of the terrain suitability "
+             "and the PCRB with each method's errors over results directories; a table and a scatter figure."
+             + EXAMPLE.format("tanbench predict results/zhou2017 results/monterey --out results/prediction"))
+def predict(
+    directories: list[Path] = typer.Argument(..., help="Results directories."),
+    out: Path = typer.Option(Path("results") / "prediction", "--out", "-o", help="Output directory."),
+):
+    from tanbench.prediction import write_prediction
+    from tanbench.results import to_markdown
+
+    cells, corr = write_prediction(directories, out)
+    typer.echo(to_markdown(corr[corr["outcome"] == "mean_time_avg_error_m"],
+                           title=f"Spearman rho over {len(cells)} (cell, method) pairs"))
+    typer.echo(f"wrote {out / 'prediction.md'}, {out / 'prediction.parquet'}, {out / 'prediction.png'}")
 
 
 @app.command(help="Benchmark the tight-dvl filter (ns per particle-step, run time, numpy ratio)."

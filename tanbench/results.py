@@ -24,6 +24,8 @@ TABLE_SCENARIO_COLUMNS = ["area", "map_resolution_m", "noise_m", "sampling_time_
 SUMMARY_ERRORS = ["horizontal_error_m", "east_error_m", "north_error_m", "heading_error_deg"]
 SUMMARY_MEANS = ["est_e", "est_n", "est_heading_deg", "truth_e", "truth_n", "truth_heading_deg",
                  "nav_e", "nav_n", "nav_heading_deg", "nav_horizontal_error_m"]
+# the PCRB series (tanbench.bounds.pcrb), the same for every run of a cell: their mean is the bound
+SUMMARY_BOUNDS = ["pcrb_horizontal_m", "pcrb_heading_deg"]
 PERCENTILES = (5, 50, 95)
 BOOTSTRAP_SAMPLES = 2000
 
@@ -116,8 +118,44 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method")) -> pd.DataFrame:
             "mean_final_heading_error_deg": float(ok["final_heading_error_deg"].mean()) if f.size else np.nan,
             "n_diverged": int(ok["diverged"].astype(bool).sum()),
             "n_failed": int((g["status"] != "ok").sum()),
+            **_consistency_columns(ok),
+            **_efficiency_columns(ok),
         })
     return pd.DataFrame(rows)
+
+
+def _consistency_columns(ok: pd.DataFrame) -> dict:
+    """NEES summaries of a group of runs (results without NEES columns get none)."""
+    from tanbench.metrics.consistency import cell_verdict
+
+    if "nees_above_95" not in ok.columns:
+        return {}
+    above = ok["nees_above_95"].to_numpy(dtype=float)
+    below = ok["nees_below_95"].to_numpy(dtype=float)
+    after = ok["nees_mean_after_convergence"].to_numpy(dtype=float)
+    return {
+        # a collapsed cloud's NEES can reach 1e15: the median over runs stays readable
+        "median_nees_after_convergence": float(np.nanmedian(after)) if np.isfinite(after).any() else np.nan,
+        "nees_above_95": float(np.nanmean(above)) if np.isfinite(above).any() else np.nan,
+        "nees_below_95": float(np.nanmean(below)) if np.isfinite(below).any() else np.nan,
+        "nees_verdict": cell_verdict(above, below),
+    }
+
+
+def _efficiency_columns(ok: pd.DataFrame) -> dict:
+    """RMSE / PCRB after convergence: mean over converged runs with its bootstrap 95 % CI."""
+    if "rmse_pcrb_ratio" not in ok.columns:
+        return {}
+    ratio = ok["rmse_pcrb_ratio"].to_numpy(dtype=float)
+    ratio = ratio[np.isfinite(ratio)]
+    lo, hi = bootstrap_ci(ratio)
+    bound = ok["pcrb_after_convergence_m"].to_numpy(dtype=float)
+    return {
+        "mean_pcrb_after_convergence_m": float(np.nanmean(bound)) if np.isfinite(bound).any() else np.nan,
+        "rmse_pcrb_ratio": float(ratio.mean()) if ratio.size else np.nan,
+        "rmse_pcrb_ratio_ci95_low": lo,
+        "rmse_pcrb_ratio_ci95_high": hi,
+    }
 
 
 def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
@@ -162,18 +200,31 @@ def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
     and headings: the mean; ``filter_std_m_mean``: the mean of the filter's horizontal
     spread sqrt(var_e + var_n). ``n_runs`` counts the runs at each time.
     """
+    from tanbench.metrics.consistency import nees
+
     allruns = pd.concat(frames, ignore_index=True)
     allruns = allruns.assign(**{f"{c}_abs": allruns[c].abs() for c in SUMMARY_ERRORS},
-                             filter_std_m=np.sqrt(allruns["var_e"] + allruns["var_n"]))
+                             filter_std_m=np.sqrt(allruns["var_e"] + allruns["var_n"]),
+                             horizontal_error_m_sq=allruns["horizontal_error_m"] ** 2,
+                             nees=nees(allruns["east_error_m"], allruns["north_error_m"], allruns["var_e"],
+                                       allruns["var_n"], allruns["cov_en"] if "cov_en" in allruns else None))
     grouped = allruns.groupby(["cell_id", "method", "t"], sort=True)
     parts = [grouped[SUMMARY_MEANS].mean(), grouped["t"].size().rename("n_runs"),
-             grouped["filter_std_m"].mean().rename("filter_std_m_mean")]
+             grouped["filter_std_m"].mean().rename("filter_std_m_mean"),
+             np.sqrt(grouped["horizontal_error_m_sq"].mean()).rename("horizontal_error_m_rms"),
+             grouped["nees"].mean().rename("nees_mean")]
+    bound_cols = [c for c in SUMMARY_BOUNDS if c in allruns.columns]
+    if bound_cols:
+        parts.append(grouped[bound_cols].mean())
     for col in SUMMARY_ERRORS:
         g = grouped[col]
         stats = {f"{col}_mean": g.mean(), f"{col}_abs_mean": grouped[f"{col}_abs"].mean()}
         stats.update({f"{col}_p{p:02d}": g.quantile(p / 100.0) for p in PERCENTILES})
         parts.append(pd.DataFrame(stats))
     out = pd.concat(parts, axis=1).reset_index()
+    from tanbench.metrics.consistency import mc_bounds
+
+    out["nees_mc_low"], out["nees_mc_high"] = mc_bounds(out["n_runs"].to_numpy())
     floats = [c for c in out.columns if c not in ("cell_id", "method", "n_runs")]
     return out.astype({c: "float32" for c in floats})
 
@@ -227,6 +278,6 @@ def to_markdown(df: pd.DataFrame, title: str | None = None) -> str:
     lines.append("| " + " | ".join(cols) + " |")
     lines.append("|" + "|".join("---" for _ in cols) + "|")
     for _, row in df.iterrows():
-        lines.append("| " + " | ".join(_fmt_ratio(row[c]) if c.startswith("ratio") else _fmt(row[c])
+        lines.append("| " + " | ".join(_fmt_ratio(row[c]) if c.startswith("ratio") or c.endswith(("_rho", "_ratio")) else _fmt(row[c])
                                        for c in cols) + " |")
     return "\n".join(lines) + "\n"

@@ -20,6 +20,8 @@ METRIC_COLUMNS = (
     "final_horizontal_error_m", "mean_horizontal_error_m", "rmse_after_convergence_m",
     "final_heading_error_deg", "convergence_time_s", "diverged", "reinitialisations",
     "final_east_error_m", "final_north_error_m", "filter_wall_s",
+    # consistency (metrics.consistency) and efficiency against the bound (bounds.pcrb): metrics.run_metrics
+    "nees_mean_after_convergence", "nees_above_95", "nees_below_95", "pcrb_after_convergence_m", "rmse_pcrb_ratio",
 )
 
 # the per-update series stored for every run (float32): the scored ones every method has
@@ -27,6 +29,7 @@ SERIES_COLUMNS = (
     "t", "est_e", "est_n", "est_u", "est_heading_deg", "truth_e", "truth_n", "truth_u",
     "truth_heading_deg", "nav_e", "nav_n", "nav_heading_deg", "east_error_m", "north_error_m",
     "horizontal_error_m", "heading_error_deg", "nav_horizontal_error_m", "ess", "var_e", "var_n",
+    "cov_en", "nees", "pcrb_horizontal_m", "pcrb_heading_deg",
 )
 
 # Arrow types of a run row's columns. They are fixed (the scenario parameters' from the

@@ -22,8 +22,13 @@ class RunResult:
     series: dict
 
 
-def score(scenario, vehicle, updates, out, wall: float) -> RunResult:
-    """Metrics and series of one method's checked output ``out`` on one run."""
+def score(scenario, vehicle, updates, out, wall: float, method: str | None = None) -> RunResult:
+    """Metrics and series of one method's checked output ``out`` on one run.
+
+    ``method`` names the method for its posterior Cramer-Rao bound (none without a name).
+    """
+    from tanbench.metrics.run_metrics import score_consistency_and_bound
+
     truth, nav = vehicle.truth, vehicle.obs.nav
     upd = updates.imu
     t = truth.t[upd]
@@ -62,6 +67,12 @@ def score(scenario, vehicle, updates, out, wall: float) -> RunResult:
         "final_north_error_m": float(err_n[-1]),
         "filter_wall_s": float(wall),
     }
+    var_e = out.var_e if out.var_e is not None else nan
+    var_n = out.var_n if out.var_n is not None else nan
+    cov_en = out.cov_en if out.cov_en is not None else nan
+    consistency, bound_series = score_consistency_and_bound(scenario, method, t, err_e, err_n, var_e, var_n,
+                                                            cov_en, conv_time, rmse)
+    metrics.update(consistency)
     series = {
         "t": t,
         "est_e": out.east, "est_n": out.north, "est_u": np.asarray(est_up, dtype=float),
@@ -73,9 +84,8 @@ def score(scenario, vehicle, updates, out, wall: float) -> RunResult:
         "east_error_m": err_e, "north_error_m": err_n, "horizontal_error_m": err_h,
         "heading_error_deg": heading_err, "nav_horizontal_error_m": nav_err_h,
         "ess": out.ess if out.ess is not None else nan, "reinit": reinit,
-        "var_e": out.var_e if out.var_e is not None else nan,
-        "var_n": out.var_n if out.var_n is not None else nan,
-        **{k: getattr(out, k) for k in ("cov_en", "var_u", "var_heading") if getattr(out, k) is not None},
-        **out.extra,
+        "var_e": var_e, "var_n": var_n, "cov_en": cov_en,
+        **{k: getattr(out, k) for k in ("var_u", "var_heading") if getattr(out, k) is not None},
+        **out.extra, **bound_series,
     }
     return RunResult(metrics=metrics, series=series)

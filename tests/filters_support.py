@@ -24,7 +24,7 @@ COMMON_SERIES = {
     "t", "est_e", "est_n", "est_u", "est_heading_deg", "truth_e", "truth_n", "truth_u",
     "truth_heading_deg", "nav_e", "nav_n", "nav_heading_deg", "east_error_m", "north_error_m",
     "horizontal_error_m", "heading_error_deg", "nav_horizontal_error_m", "ess", "reinit",
-    "var_e", "var_n",
+    "var_e", "var_n", "cov_en", "nees", "pcrb_horizontal_m", "pcrb_heading_deg",
 }
 TIGHT_SERIES = COMMON_SERIES | {"var_u", "var_heading", "var_pitch", "var_roll", "var_yaw", "var_bias_x", "var_bias_z",
                                 "bias_x_deg_h", "bias_z_deg_h"}

@@ -40,8 +40,10 @@ def init_loose(x, rng, centre_e, centre_n, half_side):
 
 @nb.njit(cache=True)
 def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div, half_side,
-                      out_en, var, ess_out, reinit_out, fixed_out):
+                      out_en, var, cov_en_out, ess_out, reinit_out, fixed_out):
     """Run the loose filter; ``out_en`` (K+1, 2) is the fix-corrected navigation position.
+
+    ``var`` (K+1, 2) and ``cov_en_out`` (K+1,) are the cloud's east/north (co)variances.
 
     ``zmap``, ``model``, ``rs`` and ``div`` are the bundles of :mod:`tanbench.filters.params`
     (MapArgs, LooseModel, Resampling, Divergence).
@@ -87,6 +89,7 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
         out_en[k, 1] = nav_en[k, 1] + fix_n
         var[k, 0] = v[0]
         var[k, 1] = v[1]
+        cov_en_out[k] = cov[0, 1]
         ess_out[k] = ess
         fixed_out[k] = 1 if converged else 0
         reinit_out[k] = 0

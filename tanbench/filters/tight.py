@@ -59,8 +59,10 @@ def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
 
 @nb.njit(cache=True)
 def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, zmap, model, rs, div,
-                      prior, est, var, ess_out, reinit_out):
-    """Run the filter over all updates; fill est/var (K+1, 8), ess_out and reinit_out (K+1,).
+                      prior, est, var, cov_en_out, ess_out, reinit_out):
+    """Run the filter over all updates; fill est/var (K+1, 8), cov_en_out, ess_out and reinit_out (K+1,).
+
+    ``cov_en_out`` is the cloud's weighted east/north covariance (``var`` holds the variances).
 
     ``zmap``, ``model``, ``rs``, ``div`` and ``prior`` are the bundles of
     :mod:`tanbench.filters.params` (MapArgs, TightModel, Resampling, Divergence, TightPrior).
@@ -96,6 +98,7 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
         ess = effective_sample_size(w)
         est[k, :] = mean
         var[k, :] = v
+        cov_en_out[k] = cov[0, 1]
         ess_out[k] = ess
         reinit_out[k] = 0
         if best < np.inf:  # an update without any bottom lock says nothing about divergence

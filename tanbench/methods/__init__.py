@@ -42,4 +42,4 @@ def run_method(scenario, name: str, vehicle, seed: np.random.SeedSequence):
     raw = record.run(ctx)
     wall = time.perf_counter() - started
     out = as_output(name, raw, ctx.updates.size)
-    return score(scenario, vehicle, ctx.updates, out, wall)
+    return score(scenario, vehicle, ctx.updates, out, wall, name)

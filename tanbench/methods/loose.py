@@ -36,12 +36,14 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     x = np.empty((sc.particles, N_LOOSE))
     init_loose(x, ctx.rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], half)
     k = upd.size
-    out_en, var = np.empty((k, 2)), np.empty((k, 2))
+    out_en, var, cov_en = np.empty((k, 2)), np.empty((k, 2)), np.empty(k)
     ess, reinit, fixed = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
     loose_filter_loop(x, ctx.rng, d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2],
                       np.ascontiguousarray(offsets), ctx.nmap.kernel_args(), model,
-                      resampling_bundle(f, LOOSE_COLS), divergence_bundle(f), half, out_en, var, ess, reinit, fixed)
-    return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], var_e=var[:, 0], var_n=var[:, 1], ess=ess,
+                      resampling_bundle(f, LOOSE_COLS), divergence_bundle(f), half, out_en, var, cov_en, ess, reinit,
+                      fixed)
+    return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en,
+                        ess=ess,
                         reinit=reinit.astype(bool), extra={"position_fix": fixed.astype(float)})
 
 
@@ -49,4 +51,4 @@ LOOSE_DVL = register(MethodRecord(
     name="loose-dvl", seed_id=3, builtin=True, run=run_loose_dvl, states=("east", "north"),
     series=("position_fix",),
     summary="a loosely coupled position-only particle filter feeding position fixes back to the navigation system",
-    cost_ns=60.0, color="tab:purple", linestyle=":"))
+    cost_ns=60.0, color="tab:purple", linestyle=":", bound=("dvl", "position")))

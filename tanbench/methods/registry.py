@@ -55,6 +55,9 @@ class MethodRecord:
     color: str | None = None
     linestyle: str = "-"
     builtin: bool = False
+    # its posterior Cramer-Rao bound (bounds.pcrb): (sensor "dvl" or "sbe", states "full" or "position");
+    # None: no bound is computed for the method
+    bound: tuple[str, str] | None = None
 
     def estimate_seconds(self, scenario) -> float:
         return self.cost_ns * 1e-9 * float(self.cost_units(scenario))

@@ -61,15 +61,15 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     init_tight(x, ctx.rng, nav.pos[k0, 0], nav.pos[k0, 1], nav.pos[k0, 2], nav.pitch[k0], nav.roll[k0],
                nav.yaw[k0], prior)
     k = upd.size
-    est, var = np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT))
+    est, var, cov_en = np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k)
     ess, reinit = np.empty(k), np.zeros(k, dtype=np.int64)
     tight_filter_loop(x, ctx.rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                       np.ascontiguousarray(ranges), np.ascontiguousarray(beams), ctx.nmap.kernel_args(), model,
                       resampling_bundle(f, REGULARISED_STATES[f.regularised_states]), divergence_bundle(f), prior,
-                      est, var, ess, reinit)
+                      est, var, cov_en, ess, reinit)
     return MethodOutput(
         east=est[:, 0], north=est[:, 1], up=est[:, U], yaw=est[:, YAW],
-        var_e=var[:, 0], var_n=var[:, 1], var_u=var[:, U], var_heading=np.degrees(np.sqrt(var[:, YAW])) ** 2,
+        var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en, var_u=var[:, U], var_heading=np.degrees(np.sqrt(var[:, YAW])) ** 2,
         ess=ess, reinit=reinit.astype(bool),
         extra={"var_pitch": var[:, PITCH], "var_roll": var[:, ROLL], "var_yaw": var[:, YAW],
                "var_bias_x": var[:, 6], "var_bias_z": var[:, 7],
@@ -91,9 +91,9 @@ TIGHT_DVL = register(MethodRecord(
     series=TIGHT_SERIES + ("var_yaw",),
     summary="the paper's tightly coupled 8-state particle filter (position, attitude, two gyro biases), "
             "weighted by the 4 DVL beams",
-    cost_ns=130.0, color="tab:red", linestyle="--"))
+    cost_ns=130.0, color="tab:red", linestyle="--", bound=("dvl", "full")))
 TIGHT_SBE = register(MethodRecord(
     name="tight-sbe", seed_id=2, builtin=True, run=run_tight_sbe, states=TIGHT_STATES,
     series=TIGHT_SERIES + ("var_yaw",),
     summary="the same 8-state particle filter weighted by the single-beam altimeter",
-    cost_ns=100.0, color="tab:blue", linestyle="-."))
+    cost_ns=100.0, color="tab:blue", linestyle="-.", bound=("sbe", "full")))

@@ -17,11 +17,22 @@ import numpy as np
 from tanbench.terrain.grid import Map
 
 
-def slope_deg(grid: Map, e: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Seafloor slope (degrees) at points, by central differences of half a grid cell."""
+def gradient(grid: Map, e: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(dz/de, dz/dn) of the bilinear surface at points, by central differences of half a cell.
+
+    Exact on a plane; NaN where a difference point leaves the grid.
+    """
+    e = np.asarray(e, dtype=float)
+    n = np.asarray(n, dtype=float)
     he, hn = grid.res_e / 2.0, grid.res_n / 2.0
     dzde = (grid.elevation(e + he, n) - grid.elevation(e - he, n)) / (2 * he)
     dzdn = (grid.elevation(e, n + hn) - grid.elevation(e, n - hn)) / (2 * hn)
+    return dzde, dzdn
+
+
+def slope_deg(grid: Map, e: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Seafloor slope (degrees) at points, from :func:`gradient`."""
+    dzde, dzdn = gradient(grid, e, n)
     return np.degrees(np.arctan(np.hypot(dzde, dzdn)))
 
 

@@ -1,0 +1,86 @@
+"""Filter consistency: the normalised estimation error squared (NEES) of the horizontal position.
+
+At each update a method reports its horizontal covariance P (``var_e``, ``var_n`` and,
+if it reports one, ``cov_en``; without it, or where it is NaN, P is taken as diagonal).
+With the error
+e = estimate - truth,
+
+    NEES_k = e_k^T P_k^{-1} e_k,
+
+which for a consistent filter (errors zero-mean with the reported covariance) is
+chi-square with 2 degrees of freedom, mean 2. Two tests (Bar-Shalom, Li & Kirubarajan
+2001, section 5.4):
+
+* **over runs** (the Monte Carlo mean at each time): with N runs, N * mean_k ~ chi2(2N),
+  so the mean lies in [chi2_{0.025}(2N) / N, chi2_{0.975}(2N) / N] 95 % of the time
+  (:func:`mc_bounds`);
+* **one run**: NEES_k lies in [chi2_{0.025}(2), chi2_{0.975}(2)] = [0.051, 7.38] 95 % of
+  the time, 2.5 % above and 2.5 % below.
+
+Per run (:func:`run_summary`): the mean NEES after convergence and the fractions of all
+updates above and below the one-run bounds. Per cell (:func:`cell_verdict`), fixed
+before any experiment: a method is **over-confident** when on average more than
+``VERDICT_FRACTION`` (25 %, ten times the nominal 2.5 %) of its updates lie above the
+bound, **under-confident** when more than that lie below it, else **consistent**.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+NEES_DOF = 2
+LEVEL = 0.95
+VERDICT_FRACTION = 0.25
+
+
+def nees(err_e, err_n, var_e, var_n, cov_en=None) -> np.ndarray:
+    """Per-update NEES of the horizontal error; NaN where the covariance is not positive definite."""
+    err_e, err_n = np.asarray(err_e, float), np.asarray(err_n, float)
+    var_e, var_n = np.asarray(var_e, float), np.asarray(var_n, float)
+    c = np.zeros_like(var_e) if cov_en is None else np.nan_to_num(np.asarray(cov_en, float), nan=0.0)
+    det = var_e * var_n - c * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = (var_n * err_e**2 - 2 * c * err_e * err_n + var_e * err_n**2) / det
+    return np.where((det > 0) & (var_e > 0), out, np.nan)
+
+
+def one_run_bounds(dof: int = NEES_DOF, level: float = LEVEL) -> tuple[float, float]:
+    """Two-sided bounds of one NEES value."""
+    a = (1 - level) / 2
+    return float(stats.chi2.ppf(a, dof)), float(stats.chi2.ppf(1 - a, dof))
+
+
+def mc_bounds(n_runs, dof: int = NEES_DOF, level: float = LEVEL):
+    """Two-sided bounds of the mean NEES over ``n_runs`` runs (array or scalar)."""
+    n = np.asarray(n_runs, dtype=float)
+    a = (1 - level) / 2
+    return stats.chi2.ppf(a, dof * n) / n, stats.chi2.ppf(1 - a, dof * n) / n
+
+
+def run_summary(t, values: np.ndarray, convergence_time_s: float) -> dict:
+    """Per-run NEES summary (``RUN_COLUMNS``) of the per-update values."""
+    t = np.asarray(t, float)
+    values = np.asarray(values, float)
+    lo, hi = one_run_bounds()
+    ok = ~np.isnan(values)
+    n = max(int(ok.sum()), 1)
+    after = values[ok & (t - t[0] >= convergence_time_s)] if np.isfinite(convergence_time_s) else values[:0]
+    return {
+        "nees_mean_after_convergence": float(after.mean()) if after.size else float("nan"),
+        "nees_above_95": float((values[ok] > hi).sum() / n) if ok.any() else float("nan"),
+        "nees_below_95": float((values[ok] < lo).sum() / n) if ok.any() else float("nan"),
+    }
+
+
+def cell_verdict(above: np.ndarray, below: np.ndarray) -> str:
+    """'over-confident', 'under-confident' or 'consistent' from the runs' fractions (see the module)."""
+    above = np.asarray(above, float)
+    below = np.asarray(below, float)
+    if np.isnan(above).all():
+        return "-"
+    if np.nanmean(above) > VERDICT_FRACTION:
+        return "over-confident"
+    if np.nanmean(below) > VERDICT_FRACTION:
+        return "under-confident"
+    return "consistent"
