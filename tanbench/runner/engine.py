@@ -319,7 +319,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
         stale = stale_cells(sweep, out)
         if stale:
             echo(f"--force: deleting every stored run of {len(stale)} cell(s) whose runs were made with other "
-                 f"seeds: {', '.join(stale)}")
+                 f"seeds or from edited map files: {', '.join(stale)}")
             store.remove_cells(out, stale)
     plan = make_plan(sweep, out, workers, series, force=force)
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
