@@ -64,7 +64,7 @@ def test_ping_information_on_a_plane_is_the_closed_form():
 
 def test_geotiff_round_trip(tmp_path):
     pytest.importorskip("tifffile")
-    from tanbench.terrain.readers import read_grid
+    from tanbench.terrain.files import read_grid
 
     grid = plane(grad=(0.02, 0.01), noise=0.3, shape=(12, 15), res=5.0)
     grid = Map(z=grid.z, e0=100.0, n0=200.0, res_e=5.0, res_n=5.0)
