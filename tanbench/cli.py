@@ -153,8 +153,13 @@ def validate(sweep_file: Path = typer.Argument(..., help="Sweep YAML file.")):
     from tanbench.runner.engine import validate_worlds
     from tanbench.runner.sweep import load_sweep
 
+    from tanbench.profiles import describe_profile
+
     sweep = load_sweep(sweep_file)
     validate_worlds(sweep)
+    if sweep.spec.profile is not None:
+        for line in describe_profile(sweep.spec.profile):
+            typer.echo(line)
     typer.echo(f"{sweep_file}: ok ({len(sweep.cells)} cell(s), {len(sweep.spec.methods)} method(s), "
                f"{sweep.spec.runs} run(s) per cell)")
 

@@ -30,7 +30,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from tanbench.options import DISTANCE_INNOVATION, REGULARISATION, REGULARISED_STATES, RESAMPLING, choices
+from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD_R, PROPAGATION,
+                              REGULARISATION, REGULARISED_STATES, RESAMPLING, choices)
 from tanbench.paperdata import scenario_facts
 
 # Bump when a model's behaviour changes without a new option (the commit says why): every
@@ -128,6 +129,22 @@ class TerrainSpec(_Strict):
     positive: Literal["up", "down"] = new_option(
         "up", description="what the file's values measure: up = elevation (seafloor negative), down = depth (negated)")
     fill_holes: bool = Field(False, description="fill no-data holes instead of rejecting the map")
+    region_hurst: dict[str, float] | None = new_option(
+        None, description="synthetic: spectral (Hurst) exponent per region name (A, B, flat, rough, background); "
+                          "unset regions keep the layout's")
+    region_corner_m: dict[str, float] | None = new_option(
+        None, description="synthetic: corner length (m) per region name; unset regions keep the layout's")
+
+    @model_validator(mode="after")
+    def _roughness_in_range(self):
+        for label, values, lo, hi in (("region_hurst", self.region_hurst, 0.1, 3.0),
+                                      ("region_corner_m", self.region_corner_m, 10.0, 1e5)):
+            for name, v in (values or {}).items():
+                if not lo <= v <= hi:
+                    raise ValueError(f"{label}.{name} must be in [{lo:g}, {hi:g}] (got {v:g})")
+        if (self.region_hurst or self.region_corner_m) and self.kind != "synthetic":
+            raise ValueError("region_hurst / region_corner_m apply to synthetic terrain only")
+        return self
 
     @model_validator(mode="after")
     def _file_needs_path(self):
@@ -225,6 +242,12 @@ class FilterSpec(_Strict):
     """Particle-filter settings (Table 2 as read in docs/model.md)."""
 
     initial_area_m: float = Field(150.0, gt=0, description="side of the uniform initial square")
+    initial_cloud: choices(INITIAL_CLOUD) = new_option(
+        "uniform", description="initial horizontal cloud: uniform square of side initial_area_m, or Gaussian with "
+                               "std initial_area_m (Table 2's 150 m read as a standard deviation)")
+    propagation: choices(PROPAGATION) = new_option(
+        "exact", description="exact 100 Hz increments, or Eq. 1 as one Euler step over the sampling time with the "
+                             "DVL velocity and body turn rates averaged over the last second / at the update sample")
     initial_std_up_m: float = Field(0.1, ge=0)
     initial_std_pitch_roll_deg: float = Field(0.1, ge=0)
     initial_std_heading_deg: float = Field(30.0, ge=0)
@@ -234,6 +257,9 @@ class FilterSpec(_Strict):
     process_noise_attitude_deg_sqrt_h: float = Field(2.0, ge=0)
     measurement_noise_distance_m: float = Field(0.1, gt=0)
     measurement_noise_altitude_m: float = Field(1.0, gt=0)
+    likelihood_r: choices(LIKELIHOOD_R) = new_option(
+        "per-component", description="Eq. 20's |R|: per-component variances, or one scalar variance for every "
+                                     "term (the norm of R = its largest variance, or its determinant)")
     distance_innovation: choices(DISTANCE_INNOVATION) = "particle"
     resampling: choices(RESAMPLING) = "systematic"
     ess_threshold: float = Field(0.5, gt=0, le=1, description="resample when ESS < threshold * N")
@@ -245,6 +271,11 @@ class FilterSpec(_Strict):
     min_spread_m: float = Field(2.0, ge=0, description="cloud std below which positions are re-spread")
     divergence_sigma: float = Field(4.0, gt=0, description="RMS innovation (in sigmas) meaning divergence")
     divergence_steps: int = Field(10, ge=1)
+    divergence_reinit: bool = new_option(
+        True, description="reinitialise a diverged filter (divergence_sigma, divergence_steps)")
+    collapse_reinit: choices(COLLAPSE_REINIT) = new_option(
+        "respread", description="a cloud below min_spread_m: re-spread positions to that std, or redraw the whole "
+                                "cloud with its initial spread around the estimate")
     outside_map_sigma: float = Field(5.0, gt=0, description="innovation charged to a beam off the map")
     loose_heading_noise: bool = Field(
         True, description="loose filter: cross-track process noise from the heading uncertainty")

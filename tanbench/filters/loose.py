@@ -22,6 +22,7 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import loglik_loose
 from tanbench.filters.propagate import propagate_loose
@@ -39,14 +40,15 @@ def init_loose(x, rng, centre_e, centre_n, half_side):
 
 
 @nb.njit(cache=True)
-def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div, half_side,
+def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div, half_side, readings,
                       out_en, var, cov_en_out, ess_out, reinit_out, fixed_out):
     """Run the loose filter; ``out_en`` (K+1, 2) is the fix-corrected navigation position.
 
     ``var`` (K+1, 2) and ``cov_en_out`` (K+1,) are the cloud's east/north (co)variances.
 
-    ``zmap``, ``model``, ``rs`` and ``div`` are the bundles of :mod:`tanbench.filters.params`
-    (MapArgs, LooseModel, Resampling, Divergence).
+    ``zmap``, ``model``, ``rs``, ``div`` and ``readings`` are the bundles of
+    :mod:`tanbench.filters.params` (MapArgs, LooseModel, Resampling, Divergence, Readings;
+    of the readings the loose filter uses ``cloud_std``, ``div_reinit`` and ``collapse_spread``).
     """
     z, e0, n0, inv_re, inv_rn = zmap
     m = x.shape[0]
@@ -95,10 +97,17 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
         reinit_out[k] = 0
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
             bad = bad + 1 if best > div.sigma * div.sigma else 0
-        if bad >= div.steps:
-            init_loose(x, rng, out_en[k, 0], out_en[k, 1], half_side)
+        spread = math.sqrt(v[0] + v[1])
+        diverged = readings.div_reinit and bad >= div.steps
+        collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
+        if diverged or collapsed:
+            centre_e = out_en[k, 0] if diverged else mean[0]
+            centre_n = out_en[k, 1] if diverged else mean[1]
+            init_loose(x, rng, centre_e, centre_n, half_side)
+            if readings.cloud_std > 0.0:
+                gaussian_horizontal(x, rng, centre_e, centre_n, readings.cloud_std)
             logw[:] = 0.0
             bad = 0
             reinit_out[k] = 1
             continue
-        resample_and_regularise(x, w, logw, ess, rng, rs, 2, math.sqrt(v[0] + v[1]), uni, idx, scratch)
+        resample_and_regularise(x, w, logw, ess, rng, rs, 2, spread, uni, idx, scratch)

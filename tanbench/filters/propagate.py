@@ -30,8 +30,9 @@ import numpy as np
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import sin_cos
-from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, JAXE, JAXN, JAZE,
-                                            JAZN, SX, SZ)
+from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, EU_VX, EU_VY, EU_WX, EU_WZ,
+                                            JAXE, JAXN, JAZE, JAZN, SX, SZ)
+from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 from tanbench.options import DISTANCE_INNOVATION
 
@@ -91,6 +92,62 @@ def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dis
         innov = np.array([inc[D0E], inc[D0N]]) - (d + e)
     else:
         innov = np.zeros_like(e)
+    return x, innov
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov):
+    """Eq. 1 read as one Euler step of length ``dt`` (the sampling time), Algorithm 1 line 4.
+
+    ``u`` = (v_x, v_y, w_x, w_z): the DVL body velocity and body turn rates
+    (``navigation.increments.euler_inputs``), held over the interval. Each particle moves
+    by ``[1 0 0; 0 1 0] C_b^n(Theta_j) [v_x, v_y, 0] dt`` with its own attitude at the
+    interval start, and its yaw by ``(-sin g_j (w_x - eps_x,j) + cos g_j (w_z - eps_z,j)) /
+    cos th_j * dt``; up, pitch and roll follow the navigation system (``inc``: Eq. 1's 0_3,
+    as in :func:`propagate_tight`). Noise and distance innovations as there; the
+    navigation distance of ``DIST_NAVIGATION`` is the navigation system's displacement.
+    """
+    vx = u[EU_VX]
+    vy = u[EU_VY]
+    wx = u[EU_WX]
+    wz = u[EU_WZ]
+    for j in range(x.shape[0]):
+        st, ct = math.sin(x[j, PITCH]), math.cos(x[j, PITCH])
+        sg, cg = math.sin(x[j, ROLL]), math.cos(x[j, ROLL])
+        sp, cp = math.sin(x[j, YAW]), math.cos(x[j, YAW])
+        de = ((cg * cp - st * sg * sp) * vx - ct * sp * vy) * dt
+        dn = ((cg * sp + st * sg * cp) * vx + ct * cp * vy) * dt
+        yaw_rate = (-sg * (wx - x[j, BX]) + cg * (wz - x[j, BZ])) / ct
+        ee = sig_pos * noise[j, 0]
+        en = sig_pos * noise[j, 1]
+        x[j, E] += de + ee
+        x[j, N] += dn + en
+        x[j, U] += inc[DUP] + sig_up * noise[j, 2]
+        x[j, PITCH] += inc[DPITCH] + sig_att * noise[j, 3]
+        x[j, ROLL] += inc[DROLL] + sig_att * noise[j, 4]
+        x[j, YAW] += yaw_rate * dt + sig_att * noise[j, 5]
+        if dist_mode == DIST_NAVIGATION:
+            dist_innov[j, 0] = inc[D0E] - (de + ee)
+            dist_innov[j, 1] = inc[D0N] - (dn + en)
+        else:
+            dist_innov[j, 0] = 0.0
+            dist_innov[j, 1] = 0.0
+
+
+def propagate_tight_euler_numpy(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode):
+    """Plain-numpy reference of :func:`propagate_tight_euler`: returns (new x, dist_innov)."""
+    x = x.copy()
+    c = dcm_body_to_nav_numpy(x[:, PITCH], x[:, ROLL], x[:, YAW])  # (M, 3, 3)
+    d = (c @ np.array([u[EU_VX], u[EU_VY], 0.0]))[:, :2] * dt
+    w = np.stack([u[EU_WX] - x[:, BX], np.zeros(len(x)), u[EU_WZ] - x[:, BZ]], 1)
+    yaw_rate = (-np.sin(x[:, ROLL]) * w[:, 0] + np.cos(x[:, ROLL]) * w[:, 2]) / np.cos(x[:, PITCH])
+    e = sig_pos * noise[:, :2]
+    x[:, [E, N]] += d + e
+    x[:, U] += inc[DUP] + sig_up * noise[:, 2]
+    x[:, PITCH] += inc[DPITCH] + sig_att * noise[:, 3]
+    x[:, ROLL] += inc[DROLL] + sig_att * noise[:, 4]
+    x[:, YAW] += yaw_rate * dt + sig_att * noise[:, 5]
+    innov = np.array([inc[D0E], inc[D0N]]) - (d + e) if dist_mode == DIST_NAVIGATION else np.zeros_like(e)
     return x, innov
 
 

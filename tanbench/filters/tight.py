@@ -18,6 +18,14 @@ The loop is jitted end to end and composed of the kernels in ``propagate``,
    duplicated particles spread out again; if the horizontal cloud has nevertheless
    collapsed below ``min_spread`` metres, re-spread it (the paper's reinitialisation of a
    too-small cloud).
+
+The paper-as-written readings (``readings``, a :class:`tanbench.filters.params.Readings`;
+docs/model.md section 9): a non-zero ``propagation`` moves the particles with one Euler
+step of Eq. 1 over ``dt`` on ``euler_in`` instead of the exact increments; ``cloud_std``
+> 0 draws (and redraws) the horizontal cloud as a Gaussian of that std instead of the
+uniform square; ``div_reinit`` False never reinitialises a diverged filter;
+``collapse_spread`` > 0 redraws a resampled cloud whose horizontal std is below it with
+the initial spread around the estimate (the whole state, as a divergence does).
 """
 
 from __future__ import annotations
@@ -27,9 +35,10 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import loglik_tight
-from tanbench.filters.propagate import propagate_tight
+from tanbench.filters.propagate import propagate_tight, propagate_tight_euler
 from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
 
@@ -59,13 +68,14 @@ def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
 
 @nb.njit(cache=True)
 def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, zmap, model, rs, div,
-                      prior, est, var, cov_en_out, ess_out, reinit_out):
+                      prior, readings, euler_in, est, var, cov_en_out, ess_out, reinit_out):
     """Run the filter over all updates; fill est/var (K+1, 8), cov_en_out, ess_out and reinit_out (K+1,).
 
     ``cov_en_out`` is the cloud's weighted east/north covariance (``var`` holds the variances).
 
-    ``zmap``, ``model``, ``rs``, ``div`` and ``prior`` are the bundles of
-    :mod:`tanbench.filters.params` (MapArgs, TightModel, Resampling, Divergence, TightPrior).
+    ``zmap``, ``model``, ``rs``, ``div``, ``prior`` and ``readings`` are the bundles of
+    :mod:`tanbench.filters.params` (MapArgs, TightModel, Resampling, Divergence, TightPrior,
+    Readings); ``euler_in`` (K, 4) the Euler-step inputs (used if ``readings.propagation``).
     """
     z, e0, n0, inv_re, inv_rn = zmap
     m = x.shape[0]
@@ -87,8 +97,12 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
             for j in range(m):
                 for c in range(6):
                     noise[j, c] = rng.standard_normal()
-            propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up, model.sig_att,
-                            model.dist_mode, dist)
+            if readings.propagation != 0:
+                propagate_tight_euler(x, euler_in[k - 1], readings.dt, inc[k - 1], noise, model.sig_pos,
+                                      model.sig_up, model.sig_att, model.dist_mode, dist)
+            else:
+                propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up, model.sig_att,
+                                model.dist_mode, dist)
         best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma,
                             dist, model.sig_d, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
         for j in range(m):
@@ -103,10 +117,15 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
         reinit_out[k] = 0
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
             bad = bad + 1 if best > div.sigma * div.sigma else 0
-        if bad >= div.steps:
+        spread = math.sqrt(v[E] + v[N])
+        diverged = readings.div_reinit and bad >= div.steps
+        collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
+        if diverged or collapsed:
             init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior)
+            if readings.cloud_std > 0.0:
+                gaussian_horizontal(x, rng, mean[E], mean[N], readings.cloud_std)
             logw[:] = 0.0
             bad = 0
             reinit_out[k] = 1
             continue
-        resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, math.sqrt(v[E] + v[N]), uni, idx, scratch)
+        resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)

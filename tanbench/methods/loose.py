@@ -12,11 +12,12 @@ import numpy as np
 
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.methods.tight import divergence_bundle, resampling_bundle
+from tanbench.methods.tight import divergence_bundle, measurement_sigmas, readings_bundle, resampling_of
 
 
 def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     """The loosely coupled position-only particle filter feeding fixes to the navigation system."""
+    from tanbench.filters.cloud import gaussian_horizontal
     from tanbench.filters.loose import LOOSE_COLS, init_loose, loose_filter_loop
     from tanbench.filters.params import LooseModel
     from tanbench.filters.state import N_LOOSE
@@ -32,15 +33,18 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     d0 = np.ascontiguousarray(np.diff(nav.pos[upd, :2], axis=0))
     model = LooseModel(f.process_noise_velocity_mps * T,
                        math.radians(f.initial_std_heading_deg) if f.loose_heading_noise else 0.0,
-                       f.measurement_noise_altitude_m, f.outside_map_sigma, f.loose_converged_std_m)
+                       measurement_sigmas(f)[1], f.outside_map_sigma, f.loose_converged_std_m)
+    readings = readings_bundle(f, T)
     x = np.empty((sc.particles, N_LOOSE))
     init_loose(x, ctx.rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], half)
+    if readings.cloud_std > 0.0:
+        gaussian_horizontal(x, ctx.rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], readings.cloud_std)
     k = upd.size
     out_en, var, cov_en = np.empty((k, 2)), np.empty((k, 2)), np.empty(k)
     ess, reinit, fixed = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
     loose_filter_loop(x, ctx.rng, d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2],
                       np.ascontiguousarray(offsets), ctx.nmap.kernel_args(), model,
-                      resampling_bundle(f, LOOSE_COLS), divergence_bundle(f), half, out_en, var, cov_en, ess, reinit,
+                      resampling_of(f, LOOSE_COLS), divergence_bundle(f), half, readings, out_en, var, cov_en, ess, reinit,
                       fixed)
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en,
                         ess=ess,

@@ -28,6 +28,52 @@ def resampling_bundle(f, regularised_cols: np.ndarray):
                       regularised_cols, size, f.min_spread_m)
 
 
+def measurement_sigmas(f) -> tuple[float, float]:
+    """(distance, altitude) noise std of the likelihood under ``filter.likelihood_r``.
+
+    ``per-component``: Table 2's diag(0.1, 0.1, 1)^2 as given. ``scalar-norm``: Eq. 20's
+    single |R| as the norm of R (its largest variance), for every term.
+    ``scalar-determinant``: |R| as the determinant of R, taken as a variance in m^2.
+    """
+    d, u = f.measurement_noise_distance_m, f.measurement_noise_altitude_m
+    if f.likelihood_r == "per-component":
+        return d, u
+    variance = max(d * d, u * u) if f.likelihood_r == "scalar-norm" else (d * d) * (d * d) * (u * u)
+    return math.sqrt(variance), math.sqrt(variance)
+
+
+def readings_bundle(f, sampling_time_s: float):
+    """The :class:`~tanbench.filters.params.Readings` bundle of a ``FilterSpec`` (docs/model.md section 9)."""
+    from tanbench.filters.params import Readings
+    from tanbench.options import PROPAGATION
+
+    return Readings(PROPAGATION[f.propagation], float(sampling_time_s),
+                    f.initial_area_m if f.initial_cloud == "gaussian" else 0.0, f.divergence_reinit,
+                    f.min_spread_m if f.collapse_reinit == "initial" else 0.0)
+
+
+def resampling_of(f, regularised_cols: np.ndarray):
+    """The Resampling bundle, without the re-spread when a collapsed cloud is redrawn instead."""
+    rs = resampling_bundle(f, regularised_cols)
+    return rs._replace(min_spread=0.0) if f.collapse_reinit == "initial" else rs
+
+
+# the Euler inputs' averaging window per propagation reading, seconds (0: the one IMU sample at the update)
+EULER_WINDOW_S = {"euler-last-second": 1.0, "euler-last-sample": 0.0}
+
+
+def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
+    """The (K-1, 4) Euler-step inputs of ``filter.propagation`` (zeros for ``exact``)."""
+    from tanbench.navigation.increments import N_EULER, compute_euler_inputs
+
+    f, obs, nav, upd = ctx.scenario.filter, ctx.obs, ctx.nav, ctx.updates.imu
+    if f.propagation == "exact":
+        return np.zeros((max(upd.size - 1, 0), N_EULER))
+    window = max(1, int(round(EULER_WINDOW_S[f.propagation] / obs.dt)))
+    return compute_euler_inputs(obs.gyro, obs.dvl_velocity, nav.pitch, nav.roll, nav.yaw, obs.latitude_rad,
+                                upd, window)
+
+
 def divergence_bundle(f):
     from tanbench.filters.params import Divergence
 
@@ -35,6 +81,7 @@ def divergence_bundle(f):
 
 
 def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
+    from tanbench.filters.cloud import gaussian_horizontal
     from tanbench.filters.params import TightModel, TightPrior
     from tanbench.filters.propagate import position_noise
     from tanbench.filters.state import N_TIGHT, PITCH, ROLL, U, YAW
@@ -50,23 +97,26 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     ranges = (obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows]
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
     dist_mode = DISTANCE_INNOVATION[f.distance_innovation]
-    model = TightModel(position_noise(f.process_noise_velocity_mps * T, f.measurement_noise_distance_m, dist_mode),
+    sig_d, sig_u = measurement_sigmas(f)
+    model = TightModel(position_noise(f.process_noise_velocity_mps * T, sig_d, dist_mode),
                        f.process_noise_up_m, f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
-                       dist_mode, f.measurement_noise_distance_m, f.measurement_noise_altitude_m,
-                       f.outside_map_sigma)
+                       dist_mode, sig_d, sig_u, f.outside_map_sigma)
+    readings = readings_bundle(f, T)
     prior = TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
                        math.radians(f.initial_std_heading_deg), f.initial_std_gyro_bias_deg_h * DEG_PER_H)
     x = np.empty((sc.particles, N_TIGHT))
     k0 = upd[0]
     init_tight(x, ctx.rng, nav.pos[k0, 0], nav.pos[k0, 1], nav.pos[k0, 2], nav.pitch[k0], nav.roll[k0],
                nav.yaw[k0], prior)
+    if readings.cloud_std > 0.0:
+        gaussian_horizontal(x, ctx.rng, nav.pos[k0, 0], nav.pos[k0, 1], readings.cloud_std)
     k = upd.size
     est, var, cov_en = np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k)
     ess, reinit = np.empty(k), np.zeros(k, dtype=np.int64)
     tight_filter_loop(x, ctx.rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                       np.ascontiguousarray(ranges), np.ascontiguousarray(beams), ctx.nmap.kernel_args(), model,
-                      resampling_bundle(f, REGULARISED_STATES[f.regularised_states]), divergence_bundle(f), prior,
-                      est, var, cov_en, ess, reinit)
+                      resampling_of(f, REGULARISED_STATES[f.regularised_states]), divergence_bundle(f), prior,
+                      readings, euler_inputs_of(ctx), est, var, cov_en, ess, reinit)
     return MethodOutput(
         east=est[:, 0], north=est[:, 1], up=est[:, U], yaw=est[:, YAW],
         var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en, var_u=var[:, U], var_heading=np.degrees(np.sqrt(var[:, YAW])) ** 2,

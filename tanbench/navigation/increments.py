@@ -93,3 +93,68 @@ def increments_numpy(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:
                   stepx.sum(), stepz.sum(), yaw[k1] - yaw[k0], pitch[k1] - pitch[k0],
                   roll[k1] - roll[k0], pos[k1, 2] - pos[k0, 2]]
     return out
+
+
+# columns of the Euler-step inputs table (Eq. 1 read as one Euler step over the sampling time)
+EU_VX, EU_VY, EU_WX, EU_WZ = range(4)
+N_EULER = 4
+
+
+@nb.njit(cache=True)
+def euler_inputs(gyro, vel_dvl, pitch, roll, yaw, earth_rate_n, earth_rate_u, update_idx, window, out):
+    """Fill ``out`` (K, 4) with the inputs of Eq. 1 for the K intervals between updates.
+
+    For the interval ending at update sample k1: the DVL body velocity (v_x, v_y) and the
+    body turn rates w_nb^b x and z (gyro minus the Earth rate projected into the body by
+    the navigation attitude; the transport rate, ~0.06 deg/h at 2 m/s, is neglected),
+    each averaged over the ``window`` IMU samples before the update (samples
+    k1 - window .. k1 - 1; an integrating gyro's sample i is the mean rate over [i, i+1]).
+    ``window = 1`` is the single sample at the update.
+    """
+    for m in range(update_idx.shape[0] - 1):
+        k1 = update_idx[m + 1]
+        k0 = max(k1 - window, 0)
+        vx = vy = wx = wz = 0.0
+        for i in range(k0, k1):
+            st, ct = math.sin(pitch[i]), math.cos(pitch[i])
+            sg, cg = math.sin(roll[i]), math.cos(roll[i])
+            sp, cp = math.sin(yaw[i]), math.cos(yaw[i])
+            # omega_ie^b = (C_b^n)^T omega_ie^n with omega_ie^n = (0, earth_rate_n, earth_rate_u)
+            bx = (cg * sp + st * sg * cp) * earth_rate_n - ct * sg * earth_rate_u
+            bz = (sg * sp - st * cg * cp) * earth_rate_n + ct * cg * earth_rate_u
+            vx += vel_dvl[i, 0]
+            vy += vel_dvl[i, 1]
+            wx += gyro[i, 0] - bx
+            wz += gyro[i, 2] - bz
+        count = max(k1 - k0, 1)
+        out[m, EU_VX] = vx / count
+        out[m, EU_VY] = vy / count
+        out[m, EU_WX] = wx / count
+        out[m, EU_WZ] = wz / count
+
+
+def compute_euler_inputs(gyro, vel_dvl, pitch, roll, yaw, latitude_rad, update_idx, window) -> np.ndarray:
+    """The (K, 4) Euler-step inputs table (see :func:`euler_inputs`)."""
+    from tanbench.earth import EARTH_RATE
+
+    update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
+    out = np.empty((max(update_idx.size - 1, 0), N_EULER))
+    euler_inputs(np.ascontiguousarray(gyro), np.ascontiguousarray(vel_dvl), np.ascontiguousarray(pitch),
+                 np.ascontiguousarray(roll), np.ascontiguousarray(yaw), EARTH_RATE * math.cos(latitude_rad),
+                 EARTH_RATE * math.sin(latitude_rad), update_idx, int(window), out)
+    return out
+
+
+def euler_inputs_numpy(gyro, vel_dvl, pitch, roll, yaw, latitude_rad, update_idx, window) -> np.ndarray:
+    """Plain-numpy reference of :func:`compute_euler_inputs`."""
+    from tanbench.earth import EARTH_RATE
+    from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
+
+    w_ie = EARTH_RATE * np.array([0.0, math.cos(latitude_rad), math.sin(latitude_rad)])
+    c = dcm_body_to_nav_numpy(pitch, roll, yaw)  # (n, 3, 3)
+    w_nb = gyro - np.einsum("nji,j->ni", c, w_ie)
+    out = np.empty((len(update_idx) - 1, N_EULER))
+    for m, k1 in enumerate(update_idx[1:]):
+        sl = slice(max(k1 - window, 0), k1)
+        out[m] = [vel_dvl[sl, 0].mean(), vel_dvl[sl, 1].mean(), w_nb[sl, 0].mean(), w_nb[sl, 2].mean()]
+    return out

@@ -57,6 +57,7 @@ class SweepSpec(BaseModel):
     seed: int = Field(ge=0)
     runs: int = Field(gt=0, le=100_000)
     methods: list[str] = Field(default_factory=lambda: list(DEFAULT_METHODS), min_length=1)
+    profile: str | None = Field(None, description="a named set of settings (tanbench.profiles) under `scenario`")
     scenario: dict[str, Any] = Field(default_factory=dict)
     tables: dict[str, dict[str, list[Value]]] = Field(default_factory=dict)
     grid: dict[str, list[Value]] | None = None
@@ -78,6 +79,14 @@ class SweepSpec(BaseModel):
             check_path_name(table, "table name")
             if table == "grid":
                 raise ValueError("table name 'grid' is taken by the grid design's table")
+
+    @field_validator("profile")
+    @classmethod
+    def _known_profile(cls, v):
+        from tanbench.profiles import PROFILES
+
+        if v is not None and v not in PROFILES:
+            raise ValueError(f"unknown profile {v!r} (known: {', '.join(PROFILES)})")
         return v
 
     @field_validator("methods")
@@ -217,6 +226,17 @@ def _set_dotted(d: dict, key: str, value) -> None:
     d[parts[-1]] = value
 
 
+def _merge(base: dict, top: dict) -> dict:
+    """``base`` updated by ``top``, nested mappings merged key by key."""
+    out = copy.deepcopy(base)
+    for k, v in top.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
 def make_scenario(base: dict, overrides: dict, label: str, where: str) -> Scenario:
     """A validated Scenario from defaults plus dotted overrides; errors name the key."""
     data = copy.deepcopy(base)
@@ -235,7 +255,13 @@ def expand(spec: SweepSpec, label: str) -> tuple[list[Cell], dict[str, list[str]
         designs.append(("grid", spec.grid))
     if not designs:
         designs = [("default", {})]
-    make_scenario(spec.scenario, {}, label, "scenario.")  # the defaults alone must be valid
+    from tanbench.profiles import profile_settings
+
+    base: dict = {}
+    for k, v in profile_settings(spec.profile).items():  # the profile, under the sweep's scenario
+        _set_dotted(base, k, v)
+    base = _merge(base, spec.scenario)
+    make_scenario(base, {}, label, "scenario.")  # the defaults alone must be valid
     cells: dict[str, Cell] = {}
     table_designs: dict[str, dict[str, list]] = {}
     for table, design in designs:
@@ -247,7 +273,7 @@ def expand(spec: SweepSpec, label: str) -> tuple[list[Cell], dict[str, list[str]
         for combo in itertools.product(*(design[k] for k in keys)):
             overrides = dict(zip(keys, combo))
             where = f"{'tables.' if table != 'grid' else ''}{table}: "
-            scenario = make_scenario(spec.scenario, overrides, label, where)
+            scenario = make_scenario(base, overrides, label, where)
             key = scenario.cell_key()
             cell = cells.setdefault(key, Cell(scenario=scenario))
             if table not in cell.tables:

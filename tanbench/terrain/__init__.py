@@ -70,9 +70,10 @@ def _truth_cached(key: str) -> Map:
     spec = TerrainSpec(**json.loads(key))
     if spec.kind == "synthetic":
         from tanbench.terrain.layouts import layout
-        from tanbench.terrain.synthetic import synthesize
+        from tanbench.terrain.synthetic import synthesize, with_roughness
 
-        return synthesize(layout(spec.layout), spec.seed, spec.truth_resolution_m)
+        shape = with_roughness(layout(spec.layout), spec.region_hurst, spec.region_corner_m)
+        return synthesize(shape, spec.seed, spec.truth_resolution_m)
     from tanbench.terrain.files import load_file_terrain
 
     return load_file_terrain(spec)

@@ -61,6 +61,26 @@ class Layout:
     shoal: tuple[float, float, float, float, float] | None = None  # (e, n, sigma_e, sigma_n, height)
 
 
+def with_roughness(layout: Layout, hurst: dict | None = None, corner_m: dict | None = None) -> Layout:
+    """``layout`` with the spectral exponent and/or corner length of named regions replaced.
+
+    Names are the regions' (``background`` included); each region keeps its calibration,
+    so the seafloor under the calibration track keeps its mean and standard deviation.
+    """
+    from dataclasses import replace
+
+    hurst, corner_m = hurst or {}, corner_m or {}
+    regions = (layout.background,) + layout.regions
+    known = {r.name for r in regions}
+    unknown = sorted((set(hurst) | set(corner_m)) - known)
+    if unknown:
+        raise ValueError(f"layout {layout.name!r} has no region {', '.join(map(repr, unknown))} "
+                         f"(regions: {', '.join(sorted(known))})")
+    new = [replace(r, hurst=float(hurst.get(r.name, r.hurst)), corner_m=float(corner_m.get(r.name, r.corner_m)))
+           for r in regions]
+    return replace(layout, background=new[0], regions=tuple(new[1:]))
+
+
 def fractal_field(shape, res, hurst, corner_m, rng, pad=0.25) -> np.ndarray:
     """Zero-mean, unit-std Gaussian field with a von Karman spectrum on a (ny, nx) grid.
 

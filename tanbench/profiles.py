@@ -1,0 +1,53 @@
+"""Named sets of scenario settings that a sweep selects in one line (``profile: NAME``).
+
+* ``recommended``: tanbench's defaults, the working, documented implementation
+  (docs/model.md sections 1-7); it sets nothing.
+* ``zhou2017-literal``: Zhou et al. 2017 as written, each setting derived from the text
+  alone (docs/model.md, section 9, gives the sentence or equation behind every one and
+  the other readings, which are ablations). No setting was chosen by fitting the
+  paper's tables.
+
+A profile is applied under the sweep's ``scenario`` (which may override it), and the
+sweep's table designs apply on top of both, so a table can switch one setting of a
+profile back (``configs/zhou2017-anatomy.yaml``).
+"""
+
+from __future__ import annotations
+
+from tanbench.errors import TanbenchError
+
+# name -> {dotted scenario key: (value, where in the paper it comes from)}
+PROFILES: dict[str, dict[str, tuple[object, str]]] = {
+    "recommended": {},
+    "zhou2017-literal": {
+        "filter.propagation": ("euler-last-second", "Eq. 1 with dt the sample time; Section 4.3: PF sampled at 1 s"),
+        "filter.resampling": ("multinomial", "Algorithm 1 lines 8-11: draw j with probability ~ q_k^(j)"),
+        "filter.ess_threshold": (1.0, "Algorithm 1: resampling at every time step"),
+        "filter.regularisation": ("none", "Algorithm 1 and Section 3.3 describe no jitter"),
+        "filter.collapse_reinit": ("respread", "Section 3.3: reinitialise if the distribution area is too small"),
+        "filter.divergence_reinit": (False, "the paper describes no divergence test"),
+        "filter.likelihood_r": ("scalar-norm", "Eq. 20: one |R| for every term"),
+        "filter.initial_cloud": ("uniform", "Section 4.3: uniform distribution over 150 m x 150 m"),
+        "filter.distance_innovation": ("particle", "Eqs. 14-18 (the navigation reading contradicts Fig. 7)"),
+        "filter.loose_heading_noise": (False, "Table 2's state noise only, for the loose TAN too"),
+    },
+}
+
+
+def profile_settings(name: str | None) -> dict[str, object]:
+    """The dotted scenario settings of profile ``name`` (None: nothing)."""
+    if name is None:
+        return {}
+    if name not in PROFILES:
+        raise TanbenchError(f"unknown profile {name!r} (known: {', '.join(PROFILES)})")
+    return {k: v for k, (v, _) in PROFILES[name].items()}
+
+
+def describe_profile(name: str) -> list[str]:
+    """One line per setting of profile ``name``: key = value (source)."""
+    if name not in PROFILES:
+        raise TanbenchError(f"unknown profile {name!r} (known: {', '.join(PROFILES)})")
+    rows = PROFILES[name]
+    if not rows:
+        return [f"profile {name}: sets nothing (tanbench's recommended defaults)"]
+    return [f"profile {name} sets:"] + [f"  {k} = {v!r}  ({src})" for k, (v, src) in rows.items()]
