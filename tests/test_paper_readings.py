@@ -1,0 +1,192 @@
+"""The paper-as-written options (docs/model.md section 9): kernels against numpy references,
+reference-free properties, neutrality of the options at today's values, and profiles."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from filters_support import KERNEL_SEED
+from tanbench.config import Scenario
+from tanbench.errors import TanbenchError
+from tanbench.filters import propagate as prop
+from tanbench.filters.cloud import gaussian_horizontal, gaussian_horizontal_numpy
+from tanbench.filters.run import measurement_sigmas
+from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
+from tanbench.navigation import increments as incmod
+from tanbench.navigation.increments import compute_euler_inputs, compute_increments, euler_inputs_numpy
+from tanbench.profiles import PROFILES, describe_profile, profile_settings
+from tanbench.runner.sweep import parse_sweep
+from tanbench.terrain.layouts import layout
+from tanbench.terrain.synthetic import with_roughness
+
+TOL = dict(rtol=1e-9, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def run_inputs(paper_run):
+    """(vehicle, update samples every 1 s) of the default full-length run."""
+    return paper_run, paper_run.ping_idx
+
+
+@pytest.mark.parametrize("window", [1, 100, 250])
+def test_euler_inputs_match_numpy(run_inputs, window):
+    v, upd = run_inputs
+    nav = v.nav
+    for idx in (upd, upd[::10], np.array([0, 3, 150, 7000, upd[-1]])):
+        jit = compute_euler_inputs(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0),
+                                   idx, window)
+        ref = euler_inputs_numpy(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0),
+                                 idx, window)
+        assert jit.shape == (idx.size - 1, incmod.N_EULER)
+        np.testing.assert_allclose(jit, ref, rtol=1e-12, atol=1e-12)
+
+
+def test_euler_inputs_follow_the_vehicle(run_inputs):
+    """Reference-free: the 1 s mean inputs are the DVL's forward speed and the navigation yaw rate."""
+    v, upd = run_inputs
+    nav = v.nav
+    u = compute_euler_inputs(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0), upd, 100)
+    assert np.allclose(u[:, incmod.EU_VY], 2.0, atol=0.02)  # 2 m/s forward, 0.4 % scale error
+    yaw_rate = (-np.sin(nav.roll[upd[1:]]) * u[:, incmod.EU_WX]
+                + np.cos(nav.roll[upd[1:]]) * u[:, incmod.EU_WZ]) / np.cos(nav.pitch[upd[1:]])
+    nav_rate = np.diff(nav.yaw[upd])  # rad per 1 s interval
+    assert np.abs(yaw_rate - nav_rate).max() < math.radians(0.05)
+
+
+@pytest.mark.parametrize("dist_mode", [prop.DIST_PARTICLE, prop.DIST_NAVIGATION], ids=["particle", "navigation"])
+@pytest.mark.parametrize("dt", [1.0, 10.0])
+def test_propagate_tight_euler_matches_numpy(run_inputs, dist_mode, dt):
+    v, upd = run_inputs
+    nav = v.nav
+    step = int(dt)
+    idx = upd[::step]
+    inc = compute_increments(v.truth.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, idx)
+    u = compute_euler_inputs(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0), idx, 100)
+    rng = np.random.default_rng([KERNEL_SEED, 13, step, dist_mode])
+    m = 211
+    for row in sorted({0, int(np.argmax(np.abs(inc[:, incmod.DYAW]))), inc.shape[0] - 1,
+                       *rng.integers(0, inc.shape[0], 3).tolist()}):
+        k0 = idx[row]
+        x0 = np.empty((m, N_TIGHT))
+        x0[:, E] = nav.pos[k0, 0] + rng.uniform(-100, 100, m)
+        x0[:, N] = nav.pos[k0, 1] + rng.uniform(-100, 100, m)
+        x0[:, U] = nav.pos[k0, 2] + rng.normal(0, 0.3, m)
+        x0[:, PITCH] = nav.pitch[k0] + rng.normal(0, 0.05, m)
+        x0[:, ROLL] = nav.roll[k0] + rng.normal(0, 0.05, m)
+        x0[:, YAW] = nav.yaw[k0] + rng.uniform(-4, 4, m)
+        x0[:, [BX, BZ]] = rng.normal(0, 1e-3, (m, 2))
+        noise = rng.standard_normal((m, 6))
+        x = x0.copy()
+        innov = np.full((m, 2), np.nan)
+        prop.propagate_tight_euler(x, u[row], dt, inc[row], noise, 0.3, 0.01, 3e-4, dist_mode, innov)
+        x_ref, innov_ref = prop.propagate_tight_euler_numpy(x0, u[row], dt, inc[row], noise, 0.3, 0.01, 3e-4,
+                                                            dist_mode)
+        np.testing.assert_allclose(x, x_ref, **TOL, err_msg=f"row {row}")
+        np.testing.assert_allclose(innov, innov_ref, **TOL, err_msg=f"row {row}")
+
+
+def test_propagate_tight_euler_geometry():
+    """Reference-free: level, yaw 0 (north), forward 2 m/s for 5 s moves 10 m north; yaw +90 deg
+    (counter-clockwise, west) moves 10 m west; the yaw integrates (w_z - eps_z) dt."""
+    x = np.zeros((3, N_TIGHT))
+    x[1, YAW] = math.pi / 2
+    x[2, BZ] = 0.01
+    u = np.array([0.0, 2.0, 0.0, 0.02])
+    inc = np.zeros(incmod.N_INCREMENTS)
+    inc[incmod.DUP] = -1.5
+    innov = np.empty((3, 2))
+    prop.propagate_tight_euler(x, u, 5.0, inc, np.zeros((3, 6)), 1.0, 1.0, 1.0, prop.DIST_NONE, innov)
+    np.testing.assert_allclose(x[0, [E, N]], [0.0, 10.0], atol=1e-12)
+    np.testing.assert_allclose(x[1, [E, N]], [-10.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(x[:, YAW], [0.1, math.pi / 2 + 0.1, 0.05], atol=1e-12)
+    np.testing.assert_allclose(x[:, U], -1.5, atol=1e-12)
+
+
+def test_euler_step_error_grows_with_the_sampling_time(run_inputs):
+    """Reference-free: one Euler step on held inputs departs from the exact displacement of the
+    navigation system by much more over 10 s than over 1 s in the lawn-mower's turns."""
+    v, upd = run_inputs
+    nav = v.nav
+    worst = {}
+    for step in (1, 10):
+        idx = upd[::step]
+        inc = compute_increments(v.truth.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, idx)
+        u = compute_euler_inputs(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0),
+                                 idx, 100)
+        x = np.zeros((idx.size - 1, N_TIGHT))
+        x[:, PITCH], x[:, ROLL], x[:, YAW] = nav.pitch[idx[:-1]], nav.roll[idx[:-1]], nav.yaw[idx[:-1]]
+        moved = np.empty((idx.size - 1, 2))
+        for r in range(idx.size - 1):
+            one = x[r:r + 1].copy()
+            prop.propagate_tight_euler(one, u[r], float(step), inc[r], np.zeros((1, 6)), 0.0, 0.0, 0.0,
+                                       prop.DIST_NONE, np.empty((1, 2)))
+            moved[r] = one[0, [E, N]]
+        worst[step] = np.hypot(*(moved - inc[:, [incmod.D0E, incmod.D0N]]).T).max()
+    assert worst[1] < 0.1  # metres: 1 s steps are nearly exact
+    assert worst[10] > 10 * worst[1] and worst[10] > 1.0
+
+
+def test_gaussian_horizontal_matches_numpy():
+    x0 = np.random.default_rng(KERNEL_SEED).normal(size=(500, N_TIGHT))
+    x = x0.copy()
+    gaussian_horizontal(x, np.random.default_rng(7), 100.0, 200.0, 150.0)
+    normals = np.random.default_rng(7).standard_normal((500, 2))  # row-major: east then north per row
+    np.testing.assert_allclose(x, gaussian_horizontal_numpy(x0, normals, 100.0, 200.0, 150.0), **TOL)
+    assert (x[:, 2:] == x0[:, 2:]).all()
+    assert abs(x[:, 0].std() - 150.0) < 15.0
+
+
+@pytest.mark.parametrize("reading, expect", [("per-component", (0.1, 1.0)), ("scalar-norm", (1.0, 1.0)),
+                                             ("scalar-determinant", (0.01, 0.01))])
+def test_measurement_sigmas(reading, expect):
+    f = Scenario(filter={"likelihood_r": reading}).filter
+    assert measurement_sigmas(f) == pytest.approx(expect)
+
+
+def test_new_options_at_neutral_change_no_key():
+    """Every new option at its neutral value leaves the cell and world keys as they were."""
+    base = Scenario()
+    same = Scenario(filter={"propagation": "exact", "likelihood_r": "per-component", "initial_cloud": "uniform",
+                            "divergence_reinit": True, "collapse_reinit": "respread"},
+                    terrain={"region_hurst": None})
+    assert same.cell_key() == base.cell_key() and same.world_key() == base.world_key()
+    assert "propagation" not in base.normalized()["filter"]
+    euler = Scenario(filter={"propagation": "euler-last-second"})
+    assert euler.cell_key() != base.cell_key() and euler.world_key() == base.world_key()
+    rough = Scenario(terrain={"region_hurst": {"A": 0.8}})
+    assert rough.world_key() != base.world_key()
+
+
+def test_roughness_override_keeps_calibration():
+    paper = layout("paper")
+    rough = with_roughness(paper, {"A": 0.8}, {"B": 350.0})
+    a = {r.name: r for r in rough.regions}
+    assert a["A"].hurst == 0.8 and a["A"].corner_m == {r.name: r for r in paper.regions}["A"].corner_m
+    assert a["B"].corner_m == 350.0 and a["A"].calibration is not None
+    with pytest.raises(ValueError, match="no region 'C'"):
+        with_roughness(paper, {"C": 1.0})
+
+
+def test_profile_in_a_sweep():
+    text = "name: p\nseed: 1\nruns: 1\nprofile: zhou2017-literal\nscenario: {filter: {resampling: systematic}}\n" \
+           "tables:\n  a: {}\n  b: {filter.regularisation: [liu-west]}\n"
+    sweep = parse_sweep(text)
+    a, b = (c.scenario.filter for c in sweep.cells)
+    assert a.propagation == "euler-last-second" and a.ess_threshold == 1.0 and a.likelihood_r == "scalar-norm"
+    assert a.resampling == "systematic"  # the sweep's scenario overrides the profile
+    assert a.regularisation == "none" and b.regularisation == "liu-west"  # a table switches one back
+    assert profile_settings("recommended") == {}
+    assert "filter.propagation = 'euler-last-second'" in "\n".join(describe_profile("zhou2017-literal"))
+    with pytest.raises(TanbenchError, match="unknown profile 'nope'"):
+        parse_sweep(text.replace("zhou2017-literal", "nope"))
+
+
+def test_literal_profile_values_are_valid_options():
+    """Each literal setting is a value its option accepts, and not the recommended one unless documented so."""
+    sc = parse_sweep("name: p\nseed: 1\nruns: 1\nprofile: zhou2017-literal\n").cells[0].scenario
+    flat = {f"filter.{k}": v for k, v in sc.filter.model_dump().items()}
+    for key, (value, source) in PROFILES["zhou2017-literal"].items():
+        assert flat[key] == value and source
