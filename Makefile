@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline predict clean
+.PHONY: run test bench paper paper-literal anatomy baseline predict clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -36,7 +36,22 @@ baseline: $(VENV)/.installed-run
 paper: $(VENV)/.installed-run
 	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --force --quiet
 	$(TB) plot results/zhou2017
-	$(TB) report results/zhou2017
+	$(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
+
+## paper-literal: the whole study as the paper's text describes it (profile zhou2017-literal) into results/zhou2017-literal (runs, tables, figures, REPORT.md); then refreshes results/zhou2017/REPORT.md if present
+paper-literal: $(VENV)/.installed-run
+	$(TB) run configs/zhou2017-literal.yaml --out results/zhou2017-literal --force --quiet
+	$(TB) tables results/zhou2017-literal --compare-paper > results/zhou2017-literal/tables.md
+	$(TB) plot results/zhou2017-literal
+	$(TB) report results/zhou2017-literal --discussion none
+	$(TB) run configs/zhou2017-literal-seed2.yaml --out results/zhou2017-literal-seed2 --force --quiet
+	$(if $(wildcard results/zhou2017/sweep.yaml),$(TB) report results/zhou2017 --literal results/zhou2017-literal $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy))
+
+## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy, its table in results/zhou2017-anatomy/ANATOMY.md
+anatomy: $(VENV)/.installed-run
+	$(TB) run configs/zhou2017-anatomy.yaml --out results/zhou2017-anatomy --force --quiet
+	$(TB) anatomy results/zhou2017-anatomy > results/zhou2017-anatomy/ANATOMY.md
+	$(if $(wildcard results/zhou2017/sweep.yaml),$(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) --anatomy results/zhou2017-anatomy)
 
 ## predict: terrain suitability maps (results/suitability) and prediction vs outcome over the committed
 ## sweeps (results/prediction: Spearman correlations of suitability and PCRB with the errors, scatter figure)

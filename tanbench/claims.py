@@ -123,14 +123,13 @@ def evaluate(runs: pd.DataFrame, series: pd.DataFrame) -> list[Claim]:
 
     a_id, b_id = _cell_id(runs), _cell_id(runs, area="B")
     c = claim("2a", "Area A: tight-dvl's heading error falls from 30 deg to under 2 deg "
-                    "(Figure 7, the Monte Carlo mean heading).")
+                    "(Figure 7: the Monte Carlo mean of |heading error| over the last 60 s).")
     mean_a = abs(_heading(series, a_id, "tight-dvl", "heading_error_deg_mean"))
     abs_a = _heading(series, a_id, "tight-dvl", "heading_error_deg_abs_mean")
-    first = series[(series["cell_id"] == a_id) & (series["method"] == "tight-dvl")].iloc[0]
-    start = (first["nav_heading_deg"] - first["truth_heading_deg"] + 180.0) % 360.0 - 180.0
-    c.check(abs(start) >= 25.0, f"initial heading error of the navigation system {start:+.1f} deg")
-    c.check(mean_a < 2.0, f"|MC mean heading error| over the last 60 s {mean_a:.2f} deg < 2 deg "
-                          f"(MC mean of |error|: {abs_a:.2f} deg)")
+    # the statistic as set: the mean of |error|; the |mean signed error| (the heading of the Monte Carlo
+    # mean trajectory, which Figure 7's caption may describe) is reported beside it and not counted
+    c.check(abs_a < 2.0, f"MC mean |heading error| over the last 60 s {abs_a:.2f} deg < 2 deg "
+                         f"(not counted: |MC mean signed error| {mean_a:.2f} deg)")
     c = claim("2b", "Area B: tight-dvl's heading error falls only to around 10 deg (Figure 11).")
     mean_b = abs(_heading(series, b_id, "tight-dvl", "heading_error_deg_mean"))
     abs_b = _heading(series, b_id, "tight-dvl", "heading_error_deg_abs_mean")
@@ -190,3 +189,15 @@ def evaluate(runs: pd.DataFrame, series: pd.DataFrame) -> list[Claim]:
     for m in ("tight-dvl", "tight-sbe"):
         _greater(c, f"vehicle run: loose-dvl final error above {m}", f("loose-dvl", **kw), f(m, **kw))
     return out
+
+
+def other_seafloor(runs: pd.DataFrame) -> Claim:
+    """The literal profile's ranking and sampling-time trend on another seafloor
+    (``configs/zhou2017-literal-seed2.yaml``; docs/model.md section 9.1, fixed before it was run)."""
+    f = lambda m, **kw: final_errors(runs, m, **kw)  # noqa: E731
+    c = Claim("seafloor-2", "Another synthetic seafloor, area A, literal profile: tight-dvl < tight-sbe < loose-dvl "
+                            "at the defaults, and tight-dvl's error grows from T = 1 s to T = 10 s.")
+    _greater(c, "tight-sbe worse than tight-dvl", f("tight-sbe"), f("tight-dvl"))
+    _greater(c, "loose-dvl worse than tight-sbe", f("loose-dvl"), f("tight-sbe"))
+    _greater(c, "tight-dvl: sampling_time_s 10 worse than 1", f("tight-dvl", sampling_time_s=10.0), f("tight-dvl"))
+    return c

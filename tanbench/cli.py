@@ -448,10 +448,17 @@ def report(
     directory: Path = typer.Argument(..., help="Results directory of configs/zhou2017.yaml."),
     discussion: Optional[Path] = typer.Option(Path("docs/zhou2017-discussion.md"), "--discussion",
                                               help="Hand-written discussion appended to the report."),
+    literal: Optional[Path] = typer.Option(None, "--literal",
+                                           help="Results of configs/zhou2017-literal.yaml, shown side by side."),
+    anatomy: Optional[Path] = typer.Option(None, "--anatomy",
+                                           help="Results of configs/zhou2017-anatomy.yaml (the anatomy table)."),
 ):
     from tanbench.report import write_report
 
-    path = write_report(directory, discussion)
+    for label, d in (("--literal", literal), ("--anatomy", anatomy)):
+        if d is not None and not (d / "sweep.yaml").exists():
+            raise TanbenchError(f"{label} {d}: not a tanbench results directory (no sweep.yaml)")
+    path = write_report(directory, discussion, literal=literal, anatomy=anatomy)
     typer.echo(f"wrote {path}")
 
 
@@ -469,6 +476,24 @@ def predict(
     typer.echo(to_markdown(corr[corr["outcome"] == "mean_time_avg_error_m"],
                            title=f"Spearman rho over {len(cells)} (cell, method) pairs"))
     typer.echo(f"wrote {out / 'prediction.md'}, {out / 'prediction.parquet'}, {out / 'prediction.png'}")
+
+
+@app.command(help="The anatomy of an anatomy sweep: per key cell, switch and method, the mean paired difference "
+                  "of the final error with a 95 % interval; writes DIR/tables/anatomy.csv and prints Markdown."
+             + EXAMPLE.format("tanbench anatomy results/zhou2017-anatomy"))
+def anatomy(directory: Path = typer.Argument(..., help="Results directory of an anatomy sweep.")):
+    from tanbench.anatomy import anatomy_markdown, anatomy_table
+    from tanbench.results import load
+    from tanbench.runner import store
+    from tanbench.runner.sweep import load_results_sweep
+
+    table = anatomy_table(load(directory), load_results_sweep(directory))
+    if table.empty:
+        raise TanbenchError(f"{directory}: no <cell>__literal / <cell>__<switch> tables with runs "
+                            f"(not an anatomy sweep, or not run yet)")
+    (directory / "tables").mkdir(parents=True, exist_ok=True)
+    store.write_text(table.to_csv(index=False), directory / "tables" / "anatomy.csv")
+    typer.echo(anatomy_markdown(table))
 
 
 @app.command(help="Benchmark the tight-dvl filter (ns per particle-step, run time, numpy ratio)."

@@ -47,19 +47,31 @@ def _session_wall(directory: Path) -> str:
             f"worker(s), {s.get('cpu_count', '?')} cores ({s.get('started', '')})")
 
 
-def table_section(name: str, table: pd.DataFrame) -> str:
-    """One table with the paper's values beside ours."""
+def _cell(r) -> str:
+    return f"{_f(r['mean_final_error_m'])} [{_f(r['min_final_error_m'])}, {_f(r['max_final_error_m'])}]"
+
+
+def table_section(name: str, table: pd.DataFrame, literal: pd.DataFrame | None = None) -> str:
+    """One table with the paper's values beside ours (and the literal profile's, if given)."""
     varied = VARIED.get(name)
     has_paper = "paper_mean_final_error_m" in table
     head = ([varied] if varied else []) + ["method", "n", "ours: mean [min, max] final (m)"]
+    lit = {}
+    if literal is not None:
+        head[-1] = "recommended: mean [min, max] final (m)"
+        head.append("literal: mean [min, max] final (m)")
+        for _, r in literal.iterrows():
+            lit[(r[varied] if varied else None, r["method"])] = r
     if has_paper:
         head += ["paper: mean [min, max] (m)", "ours / paper"]
     if "paper_mean_time_avg_error_m" in table:
         head += ["ours: time-avg (m)", "paper: time-avg (m)", "ours / paper"]
     lines = [f"### {TITLES.get(name, name)}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in table.iterrows():
-        row = ([f"{r[varied]:g}"] if varied else []) + [r["method"], str(int(r["n_runs"])),
-               f"{_f(r['mean_final_error_m'])} [{_f(r['min_final_error_m'])}, {_f(r['max_final_error_m'])}]"]
+        row = ([f"{r[varied]:g}"] if varied else []) + [r["method"], str(int(r["n_runs"])), _cell(r)]
+        if literal is not None:
+            other = lit.get((r[varied] if varied else None, r["method"]))
+            row.append("-" if other is None else _cell(other))
         if has_paper:
             row += [f"{_f(r['paper_mean_final_error_m'])} [{_f(r['paper_min_final_error_m'])}, "
                     f"{_f(r['paper_max_final_error_m'])}]", _f(r["ratio_final"], 2)]
@@ -120,8 +132,37 @@ def efficiency_section(tables: dict[str, pd.DataFrame]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(directory, discussion: Path | None = None) -> Path:
-    """Write ``DIR/REPORT.md``; returns its path."""
+USAGE = """## Which profile to use
+
+* **recommended** (the defaults; `configs/zhou2017.yaml`, `results/zhou2017`): for using
+  tanbench as a benchmark, comparing methods, and any new experiment. Its filters work
+  as well as the mechanisms allow (regularised, divergence-aware, exact propagation),
+  so differences between methods are differences of the methods, not of avoidable
+  implementation weaknesses.
+* **zhou2017-literal** (`profile: zhou2017-literal`; `configs/zhou2017-literal.yaml`,
+  `results/zhou2017-literal`): for checking the paper itself, the study as its text
+  describes it (docs/model.md section 9). Use it to ask what the published method does,
+  not as a baseline for new methods.
+"""
+
+
+def _claims_block(label: str, claims) -> list[str]:
+    parts = [f"### {label}", "",
+             f"{sum(c.reproduced for c in claims)} of {len(claims)} checkable statements reproduce "
+             f"({', '.join(c.key for c in claims if c.reproduced) or 'none'}); the others do not "
+             f"({', '.join(c.key for c in claims if not c.reproduced) or 'none'}).", ""]
+    for c in claims:
+        parts.append(f"**Claim {c.key}** ({'reproduces' if c.reproduced else 'does not reproduce'}): {c.text}")
+        parts.append("")
+        parts += [f"    {line}" for line in c.evidence]
+        parts.append("")
+    return parts
+
+
+def write_report(directory, discussion: Path | None = None, literal: Path | None = None,
+                 anatomy: Path | None = None) -> Path:
+    """Write ``DIR/REPORT.md``; returns its path. ``literal``: results of the literal profile,
+    shown beside (claims and tables); ``anatomy``: results of the anatomy sweep (its table)."""
     from tanbench.claims import evaluate
     from tanbench.paper import compare_with_paper
     from tanbench.results import load, load_series, sweep_tables
@@ -141,6 +182,11 @@ def write_report(directory, discussion: Path | None = None) -> Path:
     meta = store.read_meta(store.run_files(directory)[0])
     tables = compare_with_paper(sweep_tables(runs, sweep))
     claims = evaluate(runs, load_series(directory))
+    lit_tables, lit_claims = {}, None
+    if literal is not None:
+        lit_runs = load(literal)
+        lit_tables = sweep_tables(lit_runs, load_results_sweep(literal))
+        lit_claims = evaluate(lit_runs, load_series(literal))
     n_ok = int((runs["status"] == "ok").sum())
     parts = [
         "# Reproducing Zhou et al. 2017 with tanbench",
@@ -155,26 +201,43 @@ def write_report(directory, discussion: Path | None = None) -> Path:
         f"* tanbench {meta.get('tanbench_version')} (git {meta.get('git_revision') or 'n/a'}), "
         f"numpy {meta.get('numpy_version')}, numba {meta.get('numba_version')}",
         "* model and every interpretation of the paper: `docs/model.md`",
-        "",
-        "## The paper's claims",
-        "",
-        f"{sum(c.reproduced for c in claims)} of {len(claims)} checkable statements reproduce "
-        f"({', '.join(c.key for c in claims if c.reproduced)}); the others do not "
-        f"({', '.join(c.key for c in claims if not c.reproduced)}). The discussion at the end says why.",
-        "",
-        "Each claim is a test in `tests/test_paper_claims.py` on these results (one-sided tests at 1 %; "
-        "paired Wilcoxon where runs share their vehicle data, Mann-Whitney otherwise).",
-        "",
     ]
-    for c in claims:
-        parts.append(f"**Claim {c.key}** ({'reproduces' if c.reproduced else 'does not reproduce'}): {c.text}")
-        parts.append("")
-        parts += [f"    {line}" for line in c.evidence]
-        parts.append("")
+    if literal is not None:
+        parts.append(f"* the paper as written: `{literal}` (profile zhou2017-literal, docs/model.md section 9)")
+    if anatomy is not None:
+        parts.append(f"* the anatomy of the differences: `{anatomy}` (`configs/zhou2017-anatomy.yaml`)")
+    parts += ["", "## The paper's claims", "",
+              "Each claim is a test in `tests/test_paper_claims.py` on these results (one-sided tests at 1 %; "
+              "paired Wilcoxon where runs share their vehicle data, Mann-Whitney otherwise).", ""]
+    if lit_claims is not None:
+        parts += ["| claim | statement | literal profile | recommended profile |", "|---|---|---|---|"]
+        lit_by_key = {c.key: c for c in lit_claims}
+        yes = lambda c: "reproduces" if c.reproduced else "does not"  # noqa: E731
+        for c in claims:
+            lc = lit_by_key.get(c.key)
+            parts.append(f"| {c.key} | {c.text} | {yes(lc) if lc else '-'} | {yes(c)} |")
+        parts += ["", f"Literal profile: {sum(c.reproduced for c in lit_claims)} of {len(lit_claims)}; "
+                      f"recommended profile: {sum(c.reproduced for c in claims)} of {len(claims)}.", ""]
+        parts += _claims_block("Literal profile (the paper as written)", lit_claims)
+        parts += _claims_block("Recommended profile (tanbench's defaults)", claims)
+        parts.append(USAGE)
+    else:
+        parts += _claims_block("Results", claims)
+    if anatomy is not None:
+        from tanbench.anatomy import anatomy_markdown, anatomy_table
+
+        table = anatomy_table(load(anatomy), load_results_sweep(anatomy))
+        parts += ["## The anatomy: one mechanism at a time", "",
+                  "Starting from the literal profile, each row switches one mechanism to the recommended "
+                  "setting (docs/model.md section 9) in the key cell of every table; `recommended` switches "
+                  "them all; `terrain` keeps the literal filter on a rough seafloor (H = 0.8). Mean final "
+                  "horizontal error literal -> switched and the mean difference with a 95 % t interval, "
+                  "paired by run (the cells share their vehicle data) unless marked unpaired.", "",
+                  anatomy_markdown(table)]
     parts += ["## Tables beside the paper", ""]
     for name in TITLES:
         if name in tables:
-            parts.append(table_section(name, tables[name]))
+            parts.append(table_section(name, tables[name], lit_tables.get(name) if literal is not None else None))
     section = efficiency_section(tables)
     if section:
         parts += [section, ""]

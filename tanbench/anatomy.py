@@ -1,0 +1,98 @@
+"""The anatomy of a profile: the effect of switching one mechanism at a time, with intervals.
+
+An anatomy sweep (``configs/zhou2017-anatomy.yaml``) names its tables
+``<cell>__<switch>``: ``<cell>__literal`` is the baseline of a key cell, every other
+``<cell>__<switch>`` is the same cell with one mechanism switched. For each key cell,
+switch and method, :func:`anatomy_table` gives the mean final horizontal error of both
+and the mean difference (switched minus baseline) with a 95 % t interval:
+
+* paired by run where the two cells share their vehicle data (same world key: every
+  filter switch, so each run's difference removes the run-to-run variation of the
+  vehicle data);
+* unpaired (Welch) where the switch changes the world (the terrain).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+BASELINE = "literal"
+SEPARATOR = "__"
+LEVEL = 0.95
+ANATOMY_COLUMNS = ("cell", "switch", "method", "n", "baseline_mean_m", "switched_mean_m", "diff_mean_m",
+                   "ci_low_m", "ci_high_m", "paired")
+
+
+def difference_interval(switched: pd.Series, baseline: pd.Series, paired: bool, level: float = LEVEL):
+    """(n, mean difference, low, high): paired t on common runs, or Welch's t on all runs."""
+    if paired:
+        a, b = switched.align(baseline, join="inner")
+        d = (a - b).to_numpy(float)
+        n = d.size
+        if n < 2:
+            return n, float(d.mean()) if n else np.nan, np.nan, np.nan
+        half = stats.t.ppf(0.5 + level / 2, n - 1) * d.std(ddof=1) / np.sqrt(n)
+        return n, float(d.mean()), float(d.mean() - half), float(d.mean() + half)
+    a, b = switched.to_numpy(float), baseline.to_numpy(float)
+    n = min(a.size, b.size)
+    if a.size < 2 or b.size < 2:
+        return n, float(a.mean() - b.mean()) if n else np.nan, np.nan, np.nan
+    va, vb = a.var(ddof=1) / a.size, b.var(ddof=1) / b.size
+    se = np.sqrt(va + vb)
+    dof = (va + vb) ** 2 / (va**2 / (a.size - 1) + vb**2 / (b.size - 1)) if se > 0 else 1.0
+    diff = float(a.mean() - b.mean())
+    half = stats.t.ppf(0.5 + level / 2, dof) * se
+    return n, diff, float(diff - half), float(diff + half)
+
+
+def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_error_m") -> pd.DataFrame:
+    """One row per (key cell, switch, method); see the module docstring."""
+    cell_of = {}
+    for cell in sweep.cells:
+        for t in cell.tables:
+            cell_of[t] = cell
+    ok = runs[runs["status"] == "ok"]
+    rows = []
+    for table in sweep.table_designs:
+        if SEPARATOR not in table:
+            continue
+        name, switch = table.split(SEPARATOR, 1)
+        base_table = f"{name}{SEPARATOR}{BASELINE}"
+        if switch == BASELINE or base_table not in cell_of:
+            continue
+        base, other = cell_of[base_table], cell_of[table]
+        paired = base.scenario.world_key() == other.scenario.world_key()
+        for method in sweep.spec.methods:
+            def values(cell):
+                sel = ok[(ok["cell_id"] == cell.cell_id) & (ok["method"] == method)]
+                return sel.set_index("run")[column].sort_index()
+
+            b, s = values(base), values(other)
+            n, diff, lo, hi = difference_interval(s, b, paired)
+            rows.append(dict(cell=name, switch=switch, method=method, n=n, baseline_mean_m=float(b.mean()),
+                             switched_mean_m=float(s.mean()), diff_mean_m=diff, ci_low_m=lo, ci_high_m=hi,
+                             paired=paired))
+    return pd.DataFrame(rows, columns=list(ANATOMY_COLUMNS))
+
+
+def anatomy_markdown(table: pd.DataFrame) -> str:
+    """The anatomy as one Markdown table per key cell: methods side by side."""
+    out = []
+    for cell, part in table.groupby("cell", sort=False):
+        methods = list(dict.fromkeys(part["method"]))
+        out += [f"**{cell}**", "",
+                "| switch to recommended | " + " | ".join(f"{m}: literal -> switched, diff [95 % CI] (m)"
+                                                         for m in methods) + " |",
+                "|---|" + "---|" * len(methods)]
+        for switch, rows in part.groupby("switch", sort=False):
+            cells = []
+            for m in methods:
+                r = rows[rows["method"] == m].iloc[0]
+                ci = "" if np.isnan(r["ci_low_m"]) else f" [{r['ci_low_m']:+.1f}, {r['ci_high_m']:+.1f}]"
+                cells.append(f"{r['baseline_mean_m']:.1f} -> {r['switched_mean_m']:.1f}, "
+                             f"{r['diff_mean_m']:+.1f}{ci}{'' if r['paired'] else ' (unpaired)'}")
+            out.append(f"| {switch} | " + " | ".join(cells) + " |")
+        out.append("")
+    return "\n".join(out)
