@@ -190,3 +190,52 @@ def test_literal_profile_values_are_valid_options():
     flat = {f"filter.{k}": v for k, v in sc.filter.model_dump().items()}
     for key, (value, source) in PROFILES["zhou2017-literal"].items():
         assert flat[key] == value and source
+
+
+# ---- the options inside the filter loops ------------------------------------------------
+from filters_support import filter_seed, short_scenario, vehicle_seed  # noqa: E402
+from tanbench.filters.run import run_method  # noqa: E402
+from tanbench.simulation import simulate_vehicle  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def short_run():
+    sc = short_scenario(duration_s=60.0, particles=300)
+    return sc, simulate_vehicle(sc, vehicle_seed(0))
+
+
+@pytest.mark.parametrize("method", ["tight-dvl", "loose-dvl"])
+def test_divergence_reinit_off_never_reinitialises(short_run, method):
+    """A divergence threshold no particle meets: with divergence_reinit the filter restarts, without it never."""
+    sc, v = short_run
+    strict = {"divergence_sigma": 1e-3, "divergence_steps": 2}
+    on = run_method(sc.model_copy(update={"filter": sc.filter.model_copy(update=strict)}), method, v,
+                    filter_seed(0, 0))
+    off = run_method(sc.model_copy(update={"filter": sc.filter.model_copy(
+        update={**strict, "divergence_reinit": False})}), method, v, filter_seed(0, 0))
+    assert on.metrics["reinitialisations"] > 10 and off.metrics["reinitialisations"] == 0
+
+
+@pytest.mark.parametrize("method", ["tight-sbe", "loose-dvl"])
+def test_collapse_initial_redraws_the_cloud(short_run, method):
+    """A collapse threshold above any cloud: 'initial' redraws the cloud at every resampling,
+    'respread' never reinitialises (it jitters the positions instead)."""
+    sc, v = short_run
+    f = sc.filter.model_copy(update={"min_spread_m": 1000.0, "ess_threshold": 1.0, "divergence_reinit": False})
+    initial = run_method(sc.model_copy(update={"filter": f.model_copy(update={"collapse_reinit": "initial"})}),
+                         method, v, filter_seed(0, 1))
+    respread = run_method(sc.model_copy(update={"filter": f}), method, v, filter_seed(0, 1))
+    k = initial.series["t"].size
+    assert initial.metrics["reinitialisations"] >= k - 2 and respread.metrics["reinitialisations"] == 0
+
+
+def test_gaussian_initial_cloud_in_a_run(short_run):
+    """The first update's weighted spread is wider with a 150 m-std Gaussian cloud than the uniform square."""
+    sc, v = short_run
+    flat = sc.filter.model_copy(update={"measurement_noise_altitude_m": 1e3})  # weights ~ uniform
+    uni = run_method(sc.model_copy(update={"filter": flat}), "loose-dvl", v, filter_seed(0, 2))
+    gau = run_method(sc.model_copy(update={"filter": flat.model_copy(update={"initial_cloud": "gaussian"})}),
+                     "loose-dvl", v, filter_seed(0, 2))
+    s_uni = math.sqrt(uni.series["var_e"][0])
+    s_gau = math.sqrt(gau.series["var_e"][0])
+    assert abs(s_uni - 150 / math.sqrt(12)) < 5 and abs(s_gau - 150.0) < 12
