@@ -239,3 +239,14 @@ def test_gaussian_initial_cloud_in_a_run(short_run):
     s_uni = math.sqrt(uni.series["var_e"][0])
     s_gau = math.sqrt(gau.series["var_e"][0])
     assert abs(s_uni - 150 / math.sqrt(12)) < 5 and abs(s_gau - 150.0) < 12
+
+
+def test_validate_shows_what_the_literal_profile_sets():
+    """`tanbench validate configs/zhou2017-literal.yaml` lists every setting of the profile with its source."""
+    from sweep_support import ROOT, cli
+
+    proc = cli("validate", ROOT / "configs" / "zhou2017-literal.yaml")
+    assert proc.returncode == 0, proc.stderr
+    assert "profile zhou2017-literal sets:" in proc.stdout
+    for key, (value, _) in PROFILES["zhou2017-literal"].items():
+        assert f"{key} = {value!r}" in proc.stdout
