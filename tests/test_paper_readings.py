@@ -13,7 +13,7 @@ from tanbench.config import Scenario
 from tanbench.errors import TanbenchError
 from tanbench.filters import propagate as prop
 from tanbench.filters.cloud import gaussian_horizontal, gaussian_horizontal_numpy
-from tanbench.filters.run import measurement_sigmas
+from tanbench.methods.tight import measurement_sigmas
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.navigation import increments as incmod
 from tanbench.navigation.increments import compute_euler_inputs, compute_increments, euler_inputs_numpy
@@ -27,8 +27,8 @@ TOL = dict(rtol=1e-9, atol=1e-9)
 
 @pytest.fixture(scope="module")
 def run_inputs(paper_run):
-    """(vehicle, update samples every 1 s) of the default full-length run."""
-    return paper_run, paper_run.ping_idx
+    """(observations, update samples every 1 s) of the default full-length run."""
+    return paper_run.obs, paper_run.obs.ping_idx
 
 
 @pytest.mark.parametrize("window", [1, 100, 250])
@@ -63,7 +63,7 @@ def test_propagate_tight_euler_matches_numpy(run_inputs, dist_mode, dt):
     nav = v.nav
     step = int(dt)
     idx = upd[::step]
-    inc = compute_increments(v.truth.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, idx)
+    inc = compute_increments(v.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, idx)
     u = compute_euler_inputs(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0), idx, 100)
     rng = np.random.default_rng([KERNEL_SEED, 13, step, dist_mode])
     m = 211
@@ -113,7 +113,7 @@ def test_euler_step_error_grows_with_the_sampling_time(run_inputs):
     worst = {}
     for step in (1, 10):
         idx = upd[::step]
-        inc = compute_increments(v.truth.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, idx)
+        inc = compute_increments(v.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, idx)
         u = compute_euler_inputs(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0),
                                  idx, 100)
         x = np.zeros((idx.size - 1, N_TIGHT))
@@ -153,7 +153,7 @@ def test_new_options_at_neutral_change_no_key():
                             "divergence_reinit": True, "collapse_reinit": "respread"},
                     terrain={"region_hurst": None})
     assert same.cell_key() == base.cell_key() and same.world_key() == base.world_key()
-    assert "propagation" not in base.normalized()["filter"]
+    assert "propagation" not in base.identity()["filter"]
     euler = Scenario(filter={"propagation": "euler-last-second"})
     assert euler.cell_key() != base.cell_key() and euler.world_key() == base.world_key()
     rough = Scenario(terrain={"region_hurst": {"A": 0.8}})
@@ -194,7 +194,7 @@ def test_literal_profile_values_are_valid_options():
 
 # ---- the options inside the filter loops ------------------------------------------------
 from filters_support import filter_seed, short_scenario, vehicle_seed  # noqa: E402
-from tanbench.filters.run import run_method  # noqa: E402
+from tanbench.methods import run_method  # noqa: E402
 from tanbench.simulation import simulate_vehicle  # noqa: E402
 
 
