@@ -79,6 +79,10 @@ def test_claim(profile, key):
     assert c.reproduced, f"claim {key} ({profile}): {c.text}\n" + "\n".join(c.evidence)
 
 
+@pytest.mark.xfail(strict=True, reason="measured on the 20-run sweep (development run): tight-dvl 52.3 m (median 3.1) "
+                   "< tight-sbe 216.8 m but p = 0.015 > 1 %; loose-dvl 250.5 m not above tight-sbe (p = 0.24); "
+                   "tight-dvl at T = 10 s 18.5 m, not above T = 1 s (p = 0.41): without divergence recovery a "
+                   "few lost runs dominate the means")
 def test_literal_other_seafloor():
     """Literal profile, another seafloor (terrain seed 2, root seed 20170326, 20 runs; docs/model.md 9.1):
     tight-dvl < tight-sbe < loose-dvl at the defaults and tight-dvl worse at T = 10 s than at 1 s."""
