@@ -30,24 +30,53 @@ SEAFLOOR_2 = ROOT / "zhou2017-literal-seed2"
 SEE = "see results/zhou2017/REPORT.md (the anatomy) and docs/zhou2017-discussion.md"
 NOT_REPRODUCED = {
     "recommended": {
-        "1b": "regularisation decides it: the anatomy's literal -> liu-west switch takes tight-sbe from tens of "
-              "metres to ~2 m in area A, while tight-dvl barely moves",
-        "2a": "the MC mean of |heading error| over the last 60 s is 2.2 deg, just above the 2 deg bound "
-              "(the |MC mean signed error|, not counted, is 0.4 deg)",
-        "2b": "with regularisation and exact propagation the heading converges to ~2 deg in area B too",
-        "3b": "loose-dvl's error is dominated by its uncorrected 30 deg heading, not by the terrain",
-        "4a-loose": "loose-dvl's error is dominated by its uncorrected heading",
-        "4b-tight": "tight-dvl is insensitive to noise up to +-2 m",
-        "4b-loose": "loose-dvl's error is dominated by its uncorrected heading",
-        "4c-tight": "the anatomy's propagation switch: exact 100 Hz increments make T = 10 s almost free "
-                    "for the tight filters (the Euler step of Eq. 1 is what makes sampling time costly)",
-        "4c-loose": "loose-dvl's error is dominated by its uncorrected heading; the loose filter's propagation is "
-                    "the navigation system's own increments in both profiles",
-        "4d": "with exact propagation sampling time is the mildest factor, not the steepest",
-        "5-tight": "regularisation: 2000 particles already converge; 1000 fail only in a few runs",
-        "5-loose": "loose-dvl's error is dominated by its uncorrected heading",
+        "1b": "the anatomy (area A, 6-run development sweep): switching the literal filter to Liu-West "
+              "regularisation takes tight-sbe from 120 to 4.5 m while tight-dvl goes 3.5 -> 2.8 m; all recommended "
+              "settings: tight-sbe 1.0 m. Regularised, one beam does as well as four (1.9 vs 2.9 m)",
+        "2a": "the MC mean of |heading error| over the last 60 s is 2.18 deg, just above the 2 deg bound "
+              "(the |MC mean signed error|, not counted, is 0.39 deg)",
+        "2b": "the MC mean |heading error| in area B is 1.90 deg (A: 2.18 deg): the synthetic flat region still "
+              "makes the heading observable",
+        "3b": "loose-dvl's error is its uncorrected 30 deg heading in both areas (147 m in B, 184 m in A)",
+        "4a-loose": "loose-dvl's error is its uncorrected heading (137-184 m), not the map",
+        "4b-tight": "tight-dvl is insensitive to noise up to +-2 m (2.9 -> 3.1 m, p = 0.04)",
+        "4b-loose": "loose-dvl's error is its uncorrected heading (169-219 m)",
+        "4c-tight": "the anatomy's propagation switch at T = 10 s takes the literal tight-sbe from 59 to 13 m "
+                    "[-67, -26]: exact 100 Hz increments make long sampling almost free (tight-sbe 1.9, 2.0, 2.0 m)",
+        "4c-loose": "the loose filter propagates with the navigation system's own increments in both profiles "
+                    "(anatomy: the propagation switch changes loose-dvl by 0.0 m); its error is the heading's",
+        "4d": "with exact propagation sampling time is the mildest factor (x2.4, x1.03, x1.02), not the steepest",
+        "5-tight": "regularisation (anatomy, 1000 particles: literal tight-sbe 299 -> 27 m with Liu-West): 2000 "
+                   "particles already converge; 1000 lose only a few tight-dvl runs (mean 39.6 m, p = 0.21)",
+        "5-loose": "loose-dvl's error is its uncorrected heading (175-188 m)",
     },
-    "literal": {},
+    "literal": {
+        "1a": "tight-dvl's mean is carried by a few runs lost for good (development sweep, 37 runs: mean 62 m, "
+              "median 3.1 m, 4 runs above 75 m); without divergence recovery or regularisation nothing brings "
+              "them back",
+        "2a": "MC mean |heading error| 5.9 deg (37 runs): the lost runs keep their heading error; the "
+              "|MC mean signed error| (not counted) is 1.8 deg",
+        "2b": "the heading error in B (8.2 deg) is not larger than in A (6.0 deg; p = 0.13): A's lost runs "
+              "raise A's mean",
+        "3a": "tight-sbe is not worse in B (47.8 m) than in A (134.2 m): in A it loses 14 of 37 runs",
+        "3b": "loose-dvl is dominated by its uncorrected 30 deg heading in both areas (157 m in B, 211 m in A)",
+        "4a-tight": "tight-sbe's 10 -> 20 m step is not significant (134 -> 114 m, p = 0.81): lost runs at every "
+                    "map resolution",
+        "4a-loose": "loose-dvl is dominated by its uncorrected heading (179-232 m)",
+        "4b-tight": "lost runs at every noise level hide the trend (tight-dvl 62 -> 64 m, p = 0.41)",
+        "4c-tight": "T = 1 s loses more runs than T = 5 s (tight-dvl mean 62 vs 22 m, median 3.1 vs 4.4 m): the "
+                    "anatomy's propagation switch at T = 10 s takes tight-sbe from 59 to 13 m, so the Euler step "
+                    "costs at long T, but resampling every second without regularisation costs more at 1 s",
+        "4c-loose": "the loose filter propagates with the navigation system's increments in both profiles; "
+                    "loose-dvl is dominated by its uncorrected heading",
+        "4d": "noise 3 m is the steepest factor for the tight filters (x2.4, x1.5), sampling 10 s the mildest "
+              "(x0.65, x0.49) because T = 1 s already loses runs",
+        "5-tight": "the step 2000 -> 3000 is not significant (tight-dvl 51 vs 62 m): lost runs at every count; the "
+                   "anatomy's regularisation switch at 1000 particles takes tight-sbe from 299 to 27 m",
+        "5-loose": "loose-dvl is dominated by its uncorrected heading (207-210 m)",
+        "6b": "on the vehicle run loose-dvl (5.0 m) ends better than tight-dvl (12.7 m) and tight-sbe (20.4 m); "
+              "the recommended profile's tight filters end at 4.0 and 3.3 m there",
+    },
 }
 KEYS = ["1a", "1b", "1c", "2a", "2b", "3a", "3b", "3c", "4a-tight", "4a-loose", "4b-tight", "4b-loose",
         "4c-tight", "4c-loose", "4d", "5-tight", "5-loose", "6a", "6b"]
