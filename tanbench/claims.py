@@ -193,7 +193,7 @@ def evaluate(runs: pd.DataFrame, series: pd.DataFrame) -> list[Claim]:
 
 def other_seafloor(runs: pd.DataFrame) -> Claim:
     """The literal profile's ranking and sampling-time trend on another seafloor
-    (``configs/zhou2017-literal-seed2.yaml``; docs/model.md section 9.1, fixed before it was run)."""
+    (``configs/zhou2017-literal-seed2.yaml``; docs/model.md section 10.1, fixed before it was run)."""
     f = lambda m, **kw: final_errors(runs, m, **kw)  # noqa: E731
     c = Claim("seafloor-2", "Another synthetic seafloor, area A, literal profile: tight-dvl < tight-sbe < loose-dvl "
                             "at the defaults, and tight-dvl's error grows from T = 1 s to T = 10 s.")

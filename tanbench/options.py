@@ -19,7 +19,7 @@ REGULARISED_STATES = ("position-heading-biases", "heading-biases", "biases")
 def choices(values):
     """A ``Literal`` of a table's names (a dict's keys or a tuple), in table order."""
     return Literal[tuple(values)]
-# the paper-as-written readings (docs/model.md section 9); kernels test PROPAGATION != exact for the Euler step
+# the paper-as-written readings (docs/model.md section 10); kernels test PROPAGATION != exact for the Euler step
 PROPAGATION = {"exact": 0, "euler-last-second": 1, "euler-last-sample": 2}
 LIKELIHOOD_R = ("per-component", "scalar-norm", "scalar-determinant")
 INITIAL_CLOUD = ("uniform", "gaussian")

@@ -3,7 +3,7 @@
 * ``recommended``: tanbench's defaults, the working, documented implementation
   (docs/model.md sections 1-7); it sets nothing.
 * ``zhou2017-literal``: Zhou et al. 2017 as written, each setting derived from the text
-  alone (docs/model.md, section 9, gives the sentence or equation behind every one and
+  alone (docs/model.md, section 10, gives the sentence or equation behind every one and
   the other readings, which are ablations). No setting was chosen by fitting the
   paper's tables.
 

@@ -83,7 +83,7 @@ def table_section(name: str, table: pd.DataFrame, literal: pd.DataFrame | None =
 
 GAP_TEXT = (
     "RMSE/PCRB is each converged run's RMS horizontal error after its convergence divided by the RMS of "
-    "the posterior Cramér-Rao bound over the same updates (docs/model.md, section 9.1), averaged over the "
+    "the posterior Cramér-Rao bound over the same updates (docs/model.md, section 10.1), averaged over the "
     "converged runs, with a bootstrap 95 % CI. 1 would be an efficient estimator. The bound assumes the "
     "filter's own motion model, a map that is the terrain (no representation error, no 0.4 m node "
     "errors), Gaussian range noise of the uniform's variance and the true trajectory's footprints; the "
@@ -141,7 +141,7 @@ USAGE = """## Which profile to use
   implementation weaknesses.
 * **zhou2017-literal** (`profile: zhou2017-literal`; `configs/zhou2017-literal.yaml`,
   `results/zhou2017-literal`): for checking the paper itself, the study as its text
-  describes it (docs/model.md section 9). Use it to ask what the published method does,
+  describes it (docs/model.md section 10). Use it to ask what the published method does,
   not as a baseline for new methods.
 """
 
@@ -203,7 +203,7 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
         "* model and every interpretation of the paper: `docs/model.md`",
     ]
     if literal is not None:
-        parts.append(f"* the paper as written: `{literal}` (profile zhou2017-literal, docs/model.md section 9)")
+        parts.append(f"* the paper as written: `{literal}` (profile zhou2017-literal, docs/model.md section 10)")
     if anatomy is not None:
         parts.append(f"* the anatomy of the differences: `{anatomy}` (`configs/zhou2017-anatomy.yaml`)")
     parts += ["", "## The paper's claims", "",
@@ -229,7 +229,7 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
         table = anatomy_table(load(anatomy), load_results_sweep(anatomy))
         parts += ["## The anatomy: one mechanism at a time", "",
                   "Starting from the literal profile, each row switches one mechanism to the recommended "
-                  "setting (docs/model.md section 9) in the key cell of every table; `recommended` switches "
+                  "setting (docs/model.md section 10) in the key cell of every table; `recommended` switches "
                   "them all; `terrain` keeps the literal filter on a rough seafloor (H = 0.8). Mean final "
                   "horizontal error literal -> switched and the mean difference with a 95 % t interval, "
                   "paired by run (the cells share their vehicle data) unless marked unpaired.", "",

@@ -6,7 +6,7 @@ vehicle data, Mann-Whitney otherwise), on
 
 * ``results/zhou2017``: the recommended profile (tanbench's defaults);
 * ``results/zhou2017-literal``: the paper as written (profile zhou2017-literal,
-  docs/model.md section 9); skipped if that directory has not been generated
+  docs/model.md section 10); skipped if that directory has not been generated
   (``make paper-literal``).
 
 Claims that do not reproduce are ``xfail(strict=True)``, their reason saying what the
@@ -113,7 +113,7 @@ def test_claim(profile, key):
                    "tight-dvl at T = 10 s 18.5 m, not above T = 1 s (p = 0.41): without divergence recovery a "
                    "few lost runs dominate the means")
 def test_literal_other_seafloor():
-    """Literal profile, another seafloor (terrain seed 2, root seed 20170326, 20 runs; docs/model.md 9.1):
+    """Literal profile, another seafloor (terrain seed 2, root seed 20170326, 20 runs; docs/model.md 10.1):
     tight-dvl < tight-sbe < loose-dvl at the defaults and tight-dvl worse at T = 10 s than at 1 s."""
     if not (SEAFLOOR_2 / "sweep.yaml").exists():
         pytest.skip(f"{SEAFLOOR_2} is not generated (make paper-literal)")

@@ -1,4 +1,4 @@
-"""The paper-as-written options (docs/model.md section 9): kernels against numpy references,
+"""The paper-as-written options (docs/model.md section 10): kernels against numpy references,
 reference-free properties, neutrality of the options at today's values, and profiles."""
 
 from __future__ import annotations

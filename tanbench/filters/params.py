@@ -30,7 +30,7 @@ TightPrior = namedtuple("TightPrior", "half_side std_up std_att std_yaw std_bias
 # off-map innovation, and the horizontal std below which its estimate is a position fix
 LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma converged_std")
 
-# the paper-as-written readings (docs/model.md section 9): propagation code (options.PROPAGATION; non-zero = one
+# the paper-as-written readings (docs/model.md section 10): propagation code (options.PROPAGATION; non-zero = one
 # Euler step of Eq. 1 over ``dt`` on the Euler inputs), horizontal std of a Gaussian initial cloud (0 = the uniform
 # square), whether a diverged filter is reinitialised, and the horizontal std below which a resampled cloud is
 # redrawn with its initial spread (0 = never; the Resampling bundle's min_spread re-spreads instead)

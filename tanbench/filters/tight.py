@@ -20,7 +20,7 @@ The loop is jitted end to end and composed of the kernels in ``propagate``,
    too-small cloud).
 
 The paper-as-written readings (``readings``, a :class:`tanbench.filters.params.Readings`;
-docs/model.md section 9): a non-zero ``propagation`` moves the particles with one Euler
+docs/model.md section 10): a non-zero ``propagation`` moves the particles with one Euler
 step of Eq. 1 over ``dt`` on ``euler_in`` instead of the exact increments; ``cloud_std``
 > 0 draws (and redraws) the horizontal cloud as a Gaussian of that std instead of the
 uniform square; ``div_reinit`` False never reinitialises a diverged filter;

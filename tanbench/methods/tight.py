@@ -43,7 +43,7 @@ def measurement_sigmas(f) -> tuple[float, float]:
 
 
 def readings_bundle(f, sampling_time_s: float):
-    """The :class:`~tanbench.filters.params.Readings` bundle of a ``FilterSpec`` (docs/model.md section 9)."""
+    """The :class:`~tanbench.filters.params.Readings` bundle of a ``FilterSpec`` (docs/model.md section 10)."""
     from tanbench.filters.params import Readings
     from tanbench.options import PROPAGATION
 

@@ -79,6 +79,7 @@ class SweepSpec(BaseModel):
             check_path_name(table, "table name")
             if table == "grid":
                 raise ValueError("table name 'grid' is taken by the grid design's table")
+        return v
 
     @field_validator("profile")
     @classmethod
