@@ -63,7 +63,7 @@ def table_section(name: str, table: pd.DataFrame, literal: pd.DataFrame | None =
         for _, r in literal.iterrows():
             lit[(r[varied] if varied else None, r["method"])] = r
     if has_paper:
-        head += ["paper: mean [min, max] (m)", "ours / paper"]
+        head += ["paper: mean [min, max] (m)", "recommended / paper" if literal is not None else "ours / paper"]
     if "paper_mean_time_avg_error_m" in table:
         head += ["ours: time-avg (m)", "paper: time-avg (m)", "ours / paper"]
     lines = [f"### {TITLES.get(name, name)}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -215,7 +215,8 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
         yes = lambda c: "reproduces" if c.reproduced else "does not"  # noqa: E731
         for c in claims:
             lc = lit_by_key.get(c.key)
-            parts.append(f"| {c.key} | {c.text} | {yes(lc) if lc else '-'} | {yes(c)} |")
+            text = c.text.replace("|", "\\|")  # |x| in a claim must not end a table cell
+            parts.append(f"| {c.key} | {text} | {yes(lc) if lc else '-'} | {yes(c)} |")
         parts += ["", f"Literal profile: {sum(c.reproduced for c in lit_claims)} of {len(lit_claims)}; "
                       f"recommended profile: {sum(c.reproduced for c in claims)} of {len(claims)}.", ""]
         parts += _claims_block("Literal profile (the paper as written)", lit_claims)

@@ -51,30 +51,29 @@ NOT_REPRODUCED = {
         "5-loose": "loose-dvl's error is its uncorrected heading (175-188 m)",
     },
     "literal": {
-        "1a": "tight-dvl's mean is carried by a few runs lost for good (development sweep, 37 runs: mean 62 m, "
-              "median 3.1 m, 4 runs above 75 m); without divergence recovery or regularisation nothing brings "
-              "them back",
-        "2a": "MC mean |heading error| 5.9 deg (37 runs): the lost runs keep their heading error; the "
-              "|MC mean signed error| (not counted) is 1.8 deg",
-        "2b": "the heading error in B (8.2 deg) is not larger than in A (6.0 deg; p = 0.13): A's lost runs "
-              "raise A's mean",
-        "3a": "tight-sbe is not worse in B (47.8 m) than in A (134.2 m): in A it loses 14 of 37 runs",
-        "3b": "loose-dvl is dominated by its uncorrected 30 deg heading in both areas (157 m in B, 211 m in A)",
-        "4a-tight": "tight-sbe's 10 -> 20 m step is not significant (134 -> 114 m, p = 0.81): lost runs at every "
+        "1a": "tight-dvl's mean is carried by runs lost for good (50 runs: mean 70.3 m, median 3.0 m, 6 runs "
+              "above 75 m); without divergence recovery or regularisation nothing brings them back",
+        "2a": "MC mean |heading error| 6.5 deg: the lost runs keep their heading error (the |MC mean signed "
+              "error|, not counted, is 2.8 deg)",
+        "2b": "the heading error in B (7.9 deg) is not larger than in A (6.5 deg; p = 0.10): A's lost runs "
+              "raise A's",
+        "3a": "tight-sbe is not worse in B (51.0 m) than in A (139.0 m): in A it loses 20 of 50 runs",
+        "3b": "loose-dvl is its uncorrected 30 deg heading in both areas (158 m in B, 205 m in A)",
+        "4a-tight": "tight-sbe's 10 -> 20 m step is not significant (139 -> 107 m, p = 0.92): lost runs at every "
                     "map resolution",
-        "4a-loose": "loose-dvl is dominated by its uncorrected heading (179-232 m)",
-        "4b-tight": "lost runs at every noise level hide the trend (tight-dvl 62 -> 64 m, p = 0.41)",
-        "4c-tight": "T = 1 s loses more runs than T = 5 s (tight-dvl mean 62 vs 22 m, median 3.1 vs 4.4 m): the "
-                    "anatomy's propagation switch at T = 10 s takes tight-sbe from 59 to 13 m, so the Euler step "
-                    "costs at long T, but resampling every second without regularisation costs more at 1 s",
+        "4a-loose": "loose-dvl is its uncorrected heading (182-234 m); the 10 -> 20 m step has p = 0.074",
+        "4b-tight": "lost runs at every noise level hide the 1 -> 2 m step (tight-dvl 70 -> 77 m, p = 0.28)",
+        "4c-tight": "T = 1 s loses as many runs as T = 5 s and more metres (tight-dvl mean 70 vs 19 m, median 3.0 vs "
+                    "2.7 m): the anatomy's propagation switch at T = 10 s takes tight-sbe from 59 to 13 m, so the "
+                    "Euler step costs at long T, but resampling every second without regularisation costs more at 1 s",
         "4c-loose": "the loose filter propagates with the navigation system's increments in both profiles; "
-                    "loose-dvl is dominated by its uncorrected heading",
-        "4d": "noise 3 m is the steepest factor for the tight filters (x2.4, x1.5), sampling 10 s the mildest "
-              "(x0.65, x0.49) because T = 1 s already loses runs",
-        "5-tight": "the step 2000 -> 3000 is not significant (tight-dvl 51 vs 62 m): lost runs at every count; the "
-                   "anatomy's regularisation switch at 1000 particles takes tight-sbe from 299 to 27 m",
-        "5-loose": "loose-dvl is dominated by its uncorrected heading (207-210 m)",
-        "6b": "on the vehicle run loose-dvl (5.0 m) ends better than tight-dvl (12.7 m) and tight-sbe (20.4 m); "
+                    "loose-dvl is its uncorrected heading (205, 175, 181 m)",
+        "4d": "noise 3 m is the steepest factor for the tight filters (x2.5, x1.5), sampling 10 s the mildest "
+              "(x0.59, x0.43) because T = 1 s already loses runs",
+        "5-tight": "lost runs at every count (tight-dvl 2000 vs 3000: 45 vs 70 m, p = 0.52); the anatomy's "
+                   "regularisation switch at 1000 particles takes tight-sbe from 299 to 27 m",
+        "5-loose": "loose-dvl is its uncorrected heading (205-211 m)",
+        "6b": "on the vehicle run loose-dvl (5.0 m) ends better than tight-dvl (13.0 m) and tight-sbe (19.7 m); "
               "the recommended profile's tight filters end at 4.0 and 3.3 m there",
     },
 }
