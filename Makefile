@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline predict clean
+.PHONY: run test bench paper baseline predict check-fast scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -45,10 +45,23 @@ predict: $(VENV)/.installed-run
 	$(TB) terrain suitability configs/monterey.yaml --out results/suitability --track
 	$(TB) predict results/zhou2017 results/monterey --out results/prediction
 
-## bench: speed figures of the tight-dvl filter (printed, never asserted)
+## bench: speed of every method, numpy vs fast random numbers, kernels (printed, never asserted)
 bench: $(VENV)/.installed-run
 	$(TB) bench
 
+## check-fast: the CI sweep with filter.random_numbers: fast, checked against results/ci-baseline
+check-fast: $(VENV)/.installed-run
+	$(TB) run configs/ci.yaml --out results/ci-numpy --force --quiet
+	$(TB) run configs/ci-fast.yaml --out results/ci-fast --force --quiet
+	$(TB) check results/ci-numpy results/ci-baseline --report results/ci-numpy/check.md
+	$(TB) check results/ci-fast results/ci-baseline --report results/ci-fast/check.md
+
+## scaling: wall time of configs/quick.yaml on 1 and 2 workers (run on an otherwise idle machine)
+scaling: $(VENV)/.installed-run
+	$(TB) run configs/quick.yaml --out results/scaling-1 --force --quiet --workers 1
+	$(TB) run configs/quick.yaml --out results/scaling-2 --force --quiet --workers 2
+	@$(BIN)/python -c "import json; w = [json.loads(open(f'results/scaling-{n}/sessions.jsonl').readlines()[-1])['wall_s'] for n in (1, 2)]; print(f'1 worker {w[0]:.1f} s, 2 workers {w[1]:.1f} s: {w[0] / w[1]:.2f}x')"
+
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick results/ci
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick results/ci results/ci-numpy results/ci-fast results/scaling-1 results/scaling-2
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -249,6 +249,9 @@ class FilterSpec(_Strict):
     loose_heading_noise: bool = Field(
         True, description="loose filter: cross-track process noise from the heading uncertainty")
     loose_converged_std_m: float = Field(10.0, gt=0, description="loose filter: std for a position fix")
+    random_numbers: Literal["numpy", "fast"] = new_option(
+        "numpy", description="the jitted loops' random numbers: the run's numpy Generator, or the inlined "
+                             "xoshiro256++/ziggurat generator (tanbench/filters/rng.py; another stream)")
     convergence_threshold_m: float = Field(20.0, gt=0)
     divergence_threshold_m: float = Field(75.0, gt=0)
 

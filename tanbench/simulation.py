@@ -145,9 +145,27 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
                        initial_position_error=pos_err, initial_heading_error_deg=nav_cfg.initial_heading_error_deg)
 
 
+# worlds handed to this process ready-made (a sweep's workers get the parent's)
+_PRELOADED_WORLDS: dict[str, tuple] = {}
+PRELOAD_WORLDS_MAX = 4  # a sweep with more worlds lets each worker compute its own
+
+
+def preload_worlds(worlds: dict[str, tuple]) -> None:
+    """Use these :func:`noise_free_world` results (computed by another process, keyed by
+    the world JSON) instead of recomputing them; they are made read-only as computed ones."""
+    for key, (truth, ping_idx, dvl, sbe) in worlds.items():
+        for arr in (truth.pos, truth.pitch, truth.yaw, dvl, sbe, ping_idx):
+            arr.setflags(write=False)
+        _PRELOADED_WORLDS[key] = (truth, ping_idx, dvl, sbe)
+
+
 @lru_cache(maxsize=4)
 def noise_free_world(world_json: str):
-    """Truth at the IMU rate, ping indices and noise-free DVL/SBE ranges (cached per world)."""
+    """Truth at the IMU rate, ping indices and noise-free DVL/SBE ranges (cached per world;
+    a world given by :func:`preload_worlds` is used as it is)."""
+    given = _PRELOADED_WORLDS.get(world_json)
+    if given is not None:
+        return given
     world = json.loads(world_json)
     scenario = Scenario(**world)
     s = scenario.sensors
