@@ -19,8 +19,9 @@ observation per ping: a ping's beams share map errors), must have a position std
 must fit the noise (below (div_sigma / 2)^2 sigma_u^2, the particle filters'
 consistency test) and the match may not sit on the window's edge. A fix replaces the
 corrected position and heading and the profile is moved with it. Between fixes the
-reported variance grows with Table 2's velocity noise and the heading variance times the
-distance travelled; a fix's variance is the fine likelihood surface's.
+reported variance is the fix's (the fine likelihood surface's) plus Table 2's velocity noise
+plus the heading variance times the squared distance from the fix (a heading error turns
+the whole track since the fix about the fix's position).
 """
 
 from __future__ import annotations
@@ -193,6 +194,10 @@ def tercom_loop(d0, offsets, nav_up, start_e, start_n, z, e0, n0, inv_re, inv_rn
     pc_n = start_n
     dc = 0.0
     p_pos = var0_pos
+    p_fix = var0_pos
+    p_walk = 0.0
+    fix_e = start_e
+    fix_n = start_n
     p_head = var0_heading
     count = 0
     consistent = (0.5 * div_sigma) ** 2 * sig_u * sig_u
@@ -202,8 +207,10 @@ def tercom_loop(d0, offsets, nav_up, start_e, start_n, z, e0, n0, inv_re, inv_rn
             s = math.sin(dc)
             pc_e += c * d0[k - 1, 0] - s * d0[k - 1, 1]
             pc_n += s * d0[k - 1, 0] + c * d0[k - 1, 1]
-            p_pos += q_pos + p_head * (d0[k - 1, 0] ** 2 + d0[k - 1, 1] ** 2)
+            p_walk += q_pos
             p_head += q_heading
+            # a heading error rotates the whole track since the fix about the fix's position
+            p_pos = p_fix + p_walk + p_head * ((pc_e - fix_e) ** 2 + (pc_n - fix_n) ** 2)
         # append this update's footprints to the profile (oldest row dropped)
         for r in range(profile_len - 1):
             for i in range(m):
@@ -274,7 +281,11 @@ def tercom_loop(d0, offsets, nav_up, start_e, start_n, z, e0, n0, inv_re, inv_rn
                         pc_e += tx
                         pc_n += ty
                         dc += dd
-                        p_pos = max(fm[2], fm[3]) + fstep * fstep / 12.0
+                        p_fix = max(fm[2], fm[3]) + fstep * fstep / 12.0
+                        p_pos = p_fix
+                        p_walk = 0.0
+                        fix_e = pc_e
+                        fix_n = pc_n
                         if headings > 1:
                             p_head = min(p_head, max(cm[5], dstep * dstep / 12.0))
                         fixes[k] = 1
