@@ -174,10 +174,15 @@ def init_mpf(x, rng, centre_e, centre_n, yaw, half_side, std_yaw, var_b, var_eps
 
 
 @nb.njit(cache=True)
-def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, z, e0, n0, inv_re, inv_rn,
-             sig_pos, q_psi, q_eps, q_b, sig_u, outside_sigma, scheme, ess_thr, reg_kind, reg_size, min_spread,
-             div_sigma, div_steps, half_side, std_yaw, var_b, var_eps, est, var, ess_out, reinit_out):
-    """Run the MPF over K updates; ``est``/``var`` (K, 7): particle means/variances of the columns."""
+def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps, q_b, sig_u, outside_sigma,
+             rs, div, half_side, std_yaw, var_b, var_eps, est, var, ess_out, reinit_out):
+    """Run the MPF over K updates; ``est``/``var`` (K, 7): particle means/variances of the columns.
+
+    ``zmap`` is the map's ``MapArgs``, ``rs`` a ``Resampling`` bundle (its ``cols``: E, N, psi),
+    ``div`` a ``Divergence`` bundle (``tanbench.filters.params``).
+    """
+    z, e0, n0, inv_re, inv_rn = zmap
+    div_sigma, div_steps = div
     m = x.shape[0]
     steps = offsets.shape[0]
     logw = np.zeros(m)
@@ -217,20 +222,25 @@ def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, z, e0, n0, inv_re, inv_rn,
             bad = 0
             reinit_out[k] = 1
             continue
-        resample_and_regularise(x, w, logw, ess, rng, scheme, ess_thr, reg_kind, REG_COLS, reg_size, 3,
-                                math.sqrt(v[E] + v[N]), min_spread, uni, idx, scratch)
+        resample_and_regularise(x, w, logw, ess, rng, rs, 3, math.sqrt(v[E] + v[N]), uni, idx, scratch)
 
 
 def run_mpf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, inc, beams, ranges, zargs, rng, *,
             particles=1000, initial_area_m=150.0, initial_std_heading_deg=30.0, initial_std_gyro_bias_deg_h=25.0,
             initial_std_depth_bias_m=2.0, sig_pos=0.07, sig_att_step=None, sampling_time_s=1.0,
             gyro_bias_corr_time_s=300.0, gyro_bias_instability_deg_h=25.0, depth_bias_walk_m_sqrt_s=0.001,
-            sig_u=1.0, outside_sigma=5.0, scheme=0, ess_thr=0.5, reg_kind=1, reg_size=0.1, min_spread=2.0,
-            div_sigma=4.0, div_steps=10) -> dict:
-    """MPF on plain arrays; ``inc`` (K-1, 12) increments; ``rng`` the run's Generator."""
+            sig_u=1.0, outside_sigma=5.0, resampling=None, divergence=(4.0, 10)) -> dict:
+    """MPF on plain arrays; ``inc`` (K-1, 12) increments; ``rng`` the run's Generator.
+
+    ``resampling`` is a ``Resampling`` bundle (default: systematic at ESS < M/2, Liu-West
+    h = 0.1 on E, N, psi, 2 m minimum spread), ``divergence`` (sigma, steps).
+    """
     from tanbench.filters.beams import nav_frame_offsets
+    from tanbench.filters.params import Divergence, MapArgs, Resampling
     from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
 
+    if resampling is None:
+        resampling = Resampling(0, 0.5, 1, REG_COLS, 0.1, 2.0)
     offsets = nav_frame_offsets(nav_pitch, nav_roll, nav_yaw, beams, ranges)
     k_steps = offsets.shape[0]
     if sig_att_step is None:
@@ -247,10 +257,10 @@ def run_mpf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, inc, beams, ranges, za
     var = np.empty((k_steps, N_MPF))
     ess = np.empty(k_steps)
     reinit = np.zeros(k_steps, dtype=np.int64)
-    mpf_loop(x, rng, np.ascontiguousarray(inc), nav_yaw, np.ascontiguousarray(nav_up, dtype=float), offsets, *zargs,
-             sig_pos, sig_att_step**2, q_eps, depth_bias_walk_m_sqrt_s**2 * sampling_time_s, sig_u, outside_sigma,
-             scheme, ess_thr, reg_kind, reg_size, min_spread, div_sigma, div_steps, initial_area_m / 2.0, std_yaw,
-             var_b, var_eps, est, var, ess, reinit)
+    mpf_loop(x, rng, np.ascontiguousarray(inc), nav_yaw, np.ascontiguousarray(nav_up, dtype=float), offsets,
+             MapArgs(*zargs), sig_pos, sig_att_step**2, q_eps, depth_bias_walk_m_sqrt_s**2 * sampling_time_s, sig_u,
+             outside_sigma, resampling, Divergence(*divergence), initial_area_m / 2.0, std_yaw, var_b, var_eps,
+             est, var, ess, reinit)
     return {"est_e": est[:, E], "est_n": est[:, N], "est_yaw": est[:, PSI],
             "var_e": var[:, E], "var_n": var[:, N], "var_yaw": var[:, PSI],
             "depth_bias_m": est[:, B], "var_depth_bias": est[:, PB] + var[:, B],
