@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline predict clean
+.PHONY: run test bench paper baseline predict methods clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -45,7 +45,14 @@ predict: $(VENV)/.installed-run
 	$(TB) terrain suitability configs/monterey.yaml --out results/suitability --track
 	$(TB) predict results/zhou2017 results/monterey --out results/prediction
 
-## bench: speed figures of the tight-dvl filter (printed, never asserted)
+## methods: every estimator (PFs, PMF, MPF, IEKF, TERCOM) over areas A, B and Monterey at three budgets
+## into results/methods (tables with error statistics, divergence rate and filter wall time; the
+## accuracy-cost figure results/methods/figures/accuracy_cost.png). RUNS=n overrides the sweep's 20.
+methods: $(VENV)/.installed-run
+	$(TB) run configs/methods.yaml --out results/methods --force --quiet --workers 2 $(if $(RUNS),--runs $(RUNS))
+	$(TB) plot results/methods --frontier
+
+## bench: speed figures of the tight-dvl filter and every method's cost per update (printed, never asserted)
 bench: $(VENV)/.installed-run
 	$(TB) bench
 

@@ -5,7 +5,8 @@ map, area A. It reports nanoseconds per particle-step (a whole 1190 s run's filt
 time divided by updates x particles: propagate, weight and the resampling share),
 the wall time of that run, and the time of one update step (propagate + weight +
 normalise + estimate + resample) jitted and in the numpy reference, with their ratio.
-Figures depend on the machine; nothing here is asserted by the tests.
+Then every built-in method's cost at its defaults on that run: filter wall time per run
+and per update. Figures depend on the machine; nothing here is asserted by the tests.
 """
 
 from __future__ import annotations
@@ -104,4 +105,20 @@ def run_bench(particles: int = 3000, repeats: int = 3) -> dict:
         "step_numpy_us": round(step_np * 1e6, 1),
         "numpy_ratio": round(step_np / step_jit, 1),
         "targets": {"ns_per_particle_step": 40, "run_wall_s": 0.25, "numpy_ratio": 10},
+        "methods": method_costs(scenario, vehicle),
     }
+
+
+def method_costs(scenario, vehicle, repeats: int = 2) -> dict:
+    """Every built-in method at its defaults on the same run: filter wall time of the whole run and
+    per update (the best of ``repeats`` after a compile / cache-loading run)."""
+    from tanbench.methods import run_method, update_indices
+    from tanbench.methods.registry import builtin_names
+
+    k = update_indices(scenario, vehicle.obs).size
+    out = {}
+    for method in builtin_names():
+        walls = [run_method(scenario, method, vehicle, np.random.SeedSequence(7 + r)).metrics["filter_wall_s"]
+                 for r in range(repeats + 1)][1:]
+        out[method] = {"run_wall_s": round(min(walls), 4), "us_per_update": round(min(walls) / k * 1e6, 1)}
+    return out

@@ -430,10 +430,13 @@ def plot(
     cell: Optional[list[str]] = typer.Option(
         None, "--cell", help="Cell id (or a unique prefix) to draw; repeat for several, 'all' for every cell "
                              "[default: the first cell of each area]."),
+    frontier: bool = typer.Option(False, "--frontier",
+                                  help="Only the accuracy-cost figure: mean final error against filter wall "
+                                       "time per run, per method and cell."),
 ):
-    from tanbench.plot import plot_results
+    from tanbench.plot import plot_frontier, plot_results
 
-    written = plot_results(directory, cell)
+    written = [plot_frontier(directory)] if frontier else plot_results(directory, cell)
     typer.echo(f"wrote {len(written)} figure(s) under {directory / 'figures'}")
 
 
@@ -482,6 +485,9 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
     typer.echo(f"  one step jitted      : {figures['step_jit_us']:8.1f} us")
     typer.echo(f"  one step numpy ref   : {figures['step_numpy_us']:8.1f} us")
     typer.echo(f"  numpy / jitted       : {figures['numpy_ratio']:8.1f} x (target >= {t['numpy_ratio']})")
+    typer.echo("cost per update of every method at its defaults (same run):")
+    for method, c in figures["methods"].items():
+        typer.echo(f"  {method:12s} : {c['us_per_update']:8.1f} us per update, {c['run_wall_s']:7.3f} s per run")
 
 
 def _usage_error_types() -> tuple[type, ...]:

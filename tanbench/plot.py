@@ -244,37 +244,41 @@ def _save(fig, path: Path, plt) -> Path:
     return path
 
 
-def frontier_points(runs, budget_col: str):
-    """Per (world, method, budget): mean final error and mean filter wall time per run, from a runs table.
+def frontier_points(runs):
+    """Per (world, method, cell): mean final error, mean filter wall time per run, divergence rate.
 
-    The world is the area, or the terrain file's name for a custom area.
+    The world is the area, or "file map" for a custom area on a bathymetry file.
     """
-    import pandas as pd
-
     ok = runs[runs["status"] == "ok"].copy()
-    paths = ok["terrain.path"].astype(str) if "terrain.path" in ok else pd.Series("", index=ok.index)
-    ok["world"] = np.where(ok["area"] == "custom", "file map " + paths.str.extract(r"([^/]+?)(?:[._*]|$)")[0]
-                           .fillna(""), "area " + ok["area"].astype(str))
-    g = ok.groupby(["world", "method", budget_col], sort=False)
+    ok["world"] = np.where(ok["area"] == "custom", "file map", "area " + ok["area"].astype(str))
+    g = ok.groupby(["world", "method", "cell_id"], sort=False)
     return g.agg(mean_final_error_m=("final_horizontal_error_m", "mean"),
                  mean_filter_wall_s=("filter_wall_s", "mean"),
                  divergence_rate=("diverged", "mean"), n_runs=("run", "size")).reset_index()
 
 
-def plot_frontier(runs, path: Path, budget_col: str, styles: dict | None = None) -> Path:
+def plot_frontier(directory, cells=None) -> Path:
     """Accuracy against cost: mean final error against mean filter wall time per run, one panel per
-    world, one line per method through its budgets."""
+    world, one line per method through its cells (budgets) in order of cost. ``cells``: only these
+    cell ids (default: the cells of the tables named ``budget-*``, else all)."""
+    from tanbench.results import load
+
     plt = _pyplot()
-    pts = frontier_points(runs, budget_col)
+    directory = Path(directory)
+    runs = load(directory)
+    if cells is None:
+        budget = runs["tables"].astype(str).map(lambda t: any(x.startswith("budget-") for x in t.split(",")))
+        cells = set(runs.loc[budget, "cell_id"]) if budget.any() else set(runs["cell_id"])
+    pts = frontier_points(runs[runs["cell_id"].isin(set(cells))])
     worlds = list(dict.fromkeys(pts["world"]))
+    styles = method_styles(list(dict.fromkeys(pts["method"])))
     fig, axes = plt.subplots(1, len(worlds), figsize=(5.5 * len(worlds), 4.8), squeeze=False)
     for ax, world in zip(axes[0], worlds):
         sub = pts[pts["world"] == world]
         for method in dict.fromkeys(sub["method"]):
-            sm = sub[sub["method"] == method].sort_values(budget_col)
-            st = (styles or {}).get(method, {})
-            ax.plot(sm["mean_filter_wall_s"], sm["mean_final_error_m"], marker=st.get("marker", "o"),
-                    ls=st.get("ls", "-"), color=st.get("color"), label=method)
+            sm = sub[sub["method"] == method].sort_values("mean_filter_wall_s")
+            ls, color = styles[method]
+            ax.plot(sm["mean_filter_wall_s"], sm["mean_final_error_m"], marker="o", ls=ls, color=color, label=method)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("filter wall time per run (s)")
@@ -282,6 +286,6 @@ def plot_frontier(runs, path: Path, budget_col: str, styles: dict | None = None)
         ax.set_title(f"{world}: accuracy against cost")
         ax.grid(True, which="both", alpha=0.3)
     axes[0][0].legend(fontsize=7)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return _save(fig, path, plt)
+    figdir = directory / "figures"
+    figdir.mkdir(parents=True, exist_ok=True)
+    return _save(fig, figdir / "accuracy_cost.png", plt)

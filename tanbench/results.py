@@ -117,6 +117,8 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method")) -> pd.DataFrame:
             "max_time_avg_error_m": float(ok["mean_horizontal_error_m"].max()) if f.size else np.nan,
             "mean_final_heading_error_deg": float(ok["final_heading_error_deg"].mean()) if f.size else np.nan,
             "n_diverged": int(ok["diverged"].astype(bool).sum()),
+            "divergence_rate": float(ok["diverged"].astype(bool).mean()) if f.size else np.nan,
+            "mean_filter_wall_s": float(ok["filter_wall_s"].mean()) if f.size else np.nan,
             "n_failed": int((g["status"] != "ok").sum()),
             **_consistency_columns(ok),
             **_efficiency_columns(ok),

@@ -364,7 +364,7 @@ def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, z, e0, n0, inv_re, inv_rn,
 
 
 def run_pmf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, beams, ranges, zargs, rng=None, *,
-            cells=32, headings=12, heading_span_deg=60.0, initial_area_m=150.0,
+            cells=32, headings=15, heading_span_deg=60.0, initial_area_m=150.0,
             initial_std_heading_deg=30.0, sig_pos=0.07, heading_drift_deg_sqrt_s=0.25,
             sampling_time_s=1.0, min_spacing_m=0.5, sig_u=1.0, outside_sigma=5.0,
             div_sigma=4.0, div_steps=10) -> dict:
@@ -383,7 +383,8 @@ def run_pmf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, beams, ranges, zargs, 
     d0 = np.ascontiguousarray(np.diff(nav_en, axis=0))
     sig0 = math.radians(initial_std_heading_deg)
     if headings > 1:
-        span = math.radians(heading_span_deg)
+        # the bank spans the heading prior (2.5 sigma), at most heading_span_deg
+        span = min(math.radians(heading_span_deg), 2.5 * sig0) if sig0 > 0 else math.radians(heading_span_deg)
         deltas = np.linspace(-span, span, headings)
         sig_cross = (deltas[1] - deltas[0]) / math.sqrt(12.0)
     else:
