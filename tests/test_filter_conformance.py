@@ -308,6 +308,32 @@ def test_flat_seafloor_leaves_position_unobservable(plane_world, method):
             np.testing.assert_array_equal(s["est_n"], s["nav_n"])
 
 
+@pytest.mark.parametrize("method", [pytest.param(m, marks=pytest.mark.xfail(
+    strict=True, reason="loose-dvl reports its particle cloud's variance, not that of its output (the "
+                        "navigation solution until a fix): 222 m of error under a 64 m sigma on a plane"))
+    if m == "loose-dvl" else m for m in METHODS])
+def test_flat_seafloor_error_follows_navigation_and_no_fix_is_claimed(plane_world, method):
+    """Where TAN has no information (a plane), every method's error follows the navigation system's
+    and its reported covariance admits it: at every update the estimate lies within 3 reported
+    sigmas (sqrt(var_e + var_n)) of the truth and of the navigation solution, and over two runs the
+    mean final error is at least half the navigation system's (no method beats dead reckoning
+    without information). Thresholds fixed before the runs were looked at."""
+    sc = short_scenario(duration_s=300.0, particles=500)
+    final, nav_final = [], []
+    for k in range(2):
+        r = run_method(sc, method, simulate_vehicle(sc, vseed(k)), fseed(k, method))
+        check_finite(r, method)
+        s = r.series
+        sigma = np.sqrt(s["var_e"] + s["var_n"])
+        assert (s["horizontal_error_m"] <= 3.0 * sigma).all(), \
+            f"{method}: error {s['horizontal_error_m'].max():.1f} m beyond 3 sigma (min sigma {sigma.min():.1f} m)"
+        off_nav = np.hypot(s["est_e"] - s["nav_e"], s["est_n"] - s["nav_n"])
+        assert (off_nav <= 3.0 * sigma).all(), f"{method}: {off_nav.max():.1f} m off the navigation solution"
+        final.append(s["horizontal_error_m"][-1])
+        nav_final.append(s["nav_horizontal_error_m"][-1])
+    assert np.mean(final) >= 0.5 * np.mean(nav_final), (final, nav_final)
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_no_bottom_lock_is_not_divergence(method):
     """With a 45 m maximum range the sonar loses the bottom for ~60 s of the first 120 s (all DVL
