@@ -23,6 +23,10 @@ slices. One update:
    still covered. Re-gridding samples the old density bilinearly at the new nodes.
    Slices without mass are skipped and parked at the global mean.
 
+The bank is centred on the navigation heading and spans +-2.5 sigma of the heading prior
+(at most ``heading_span``), so a small prior gets fine slices and the paper's 30 deg gets
+15 slices 8.6 deg apart over +-60 deg.
+
 With ``H = 1`` this is the position-only PMF (TRN's): the whole 30 deg heading prior
 then enters as cross-track process noise, as in the loose particle filter.
 The initial grid covers the same ``initial_area`` square as the particle filters'
