@@ -247,10 +247,12 @@ def _save(fig, path: Path, plt) -> Path:
 def frontier_points(runs):
     """Per (world, method, cell): mean final error, mean filter wall time per run, divergence rate.
 
-    The world is the area, or "file map" for a custom area on a bathymetry file.
+    The world is the area, or "file map <name>" for a custom area on a bathymetry file.
     """
     ok = runs[runs["status"] == "ok"].copy()
-    ok["world"] = np.where(ok["area"] == "custom", "file map", "area " + ok["area"].astype(str))
+    stem = ok["terrain.path"].astype(str).str.extract(r"([A-Za-z]+)[^/]*$")[0].fillna("") \
+        if "terrain.path" in ok else ""
+    ok["world"] = np.where(ok["area"] == "custom", "file map " + stem, "area " + ok["area"].astype(str))
     g = ok.groupby(["world", "method", "cell_id"], sort=False)
     return g.agg(mean_final_error_m=("final_horizontal_error_m", "mean"),
                  mean_filter_wall_s=("filter_wall_s", "mean"),
@@ -270,7 +272,7 @@ def plot_frontier(directory, cells=None) -> Path:
         budget = runs["tables"].astype(str).map(lambda t: any(x.startswith("budget-") for x in t.split(",")))
         cells = set(runs.loc[budget, "cell_id"]) if budget.any() else set(runs["cell_id"])
     pts = frontier_points(runs[runs["cell_id"].isin(set(cells))])
-    worlds = list(dict.fromkeys(pts["world"]))
+    worlds = sorted(dict.fromkeys(pts["world"]))
     styles = method_styles(list(dict.fromkeys(pts["method"])))
     fig, axes = plt.subplots(1, len(worlds), figsize=(5.5 * len(worlds), 4.8), squeeze=False)
     for ax, world in zip(axes[0], worlds):
