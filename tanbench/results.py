@@ -118,7 +118,7 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method")) -> pd.DataFrame:
             "mean_final_heading_error_deg": float(ok["final_heading_error_deg"].mean()) if f.size else np.nan,
             "n_diverged": int(ok["diverged"].astype(bool).sum()),
             "divergence_rate": float(ok["diverged"].astype(bool).mean()) if f.size else np.nan,
-            "mean_filter_wall_s": float(ok["filter_wall_s"].mean()) if f.size else np.nan,
+            "mean_filter_wall_s": float(ok["filter_wall_s"].mean()) if f.size and "filter_wall_s" in ok else np.nan,
             "n_failed": int((g["status"] != "ok").sum()),
             **_consistency_columns(ok),
             **_efficiency_columns(ok),
