@@ -1,6 +1,6 @@
 """Iterated extended Kalman filter with local terrain linearisation (SITAN; Hostetler & Andreas 1983).
 
-State, relative to nothing but the map frame: x = [E, N, delta, eps_z], the horizontal
+State x = [E, N, delta, eps_z] in the map frame: the horizontal
 position, the heading offset from the navigation heading (yaw = nav yaw + delta) and the
 z-gyro bias (rad/s). Between updates (the navigation increments, ``navigation/increments.py``)
 
