@@ -232,3 +232,16 @@ def test_mpf_depth_bias_kalman_filter_finds_the_bias(rough_map, rng):
     # noise-free measurements of 2.5 m against the N(0, 4) prior: the posterior mean 2.5 * 80 / (1/4 + 80)
     assert x[0, mpf.B] == pytest.approx(2.5 * 80.0 / (0.25 + 80.0), rel=1e-9)
     assert x[0, mpf.PB] == pytest.approx(1.0 / (1.0 / 4.0 + 80.0), rel=1e-9)
+
+
+def test_beam_projection_matches_numpy(rng):
+    from tanbench.filters import beams as bm
+
+    k = 20
+    pitch, roll, yaw = rng.normal(0, 0.1, k), rng.normal(0, 0.1, k), rng.uniform(-3, 3, k)
+    b = rng.normal(size=(4, 3))
+    r = rng.uniform(20, 60, (k, 4))
+    r[3, 2] = np.nan
+    got = bm.nav_frame_offsets(pitch, roll, yaw, b, r)
+    np.testing.assert_allclose(got, bm.nav_frame_offsets_numpy(pitch, roll, yaw, b, r), **TOL, equal_nan=True)
+    assert np.isnan(got[3, 2]).all() and np.isfinite(np.delete(got.reshape(-1, 3), 3 * 4 + 2, 0)).all()
