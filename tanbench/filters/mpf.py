@@ -25,6 +25,9 @@ The weights are the marginal likelihood of the beams with b integrated out,
 N(nu; b_hat 1, P_b 1 1^T + sigma_u^2 I), in closed form (Sherman-Morrison); the yaw is
 sampled from its marginal N(psi + dpsi - S_z eps_hat, S_z^2 P_eps + q_psi). Resampling,
 regularisation (position and yaw) and divergence handling are the tight filter's.
+The kernels are compiled without fastmath: with FMA contraction a kernel's last bits
+depended on whether it was compiled inline in the loop or on its own first, so a run
+could differ by an ulp between processes.
 """
 
 from __future__ import annotations
@@ -34,7 +37,6 @@ import math
 import numba as nb
 import numpy as np
 
-from tanbench.filters import FASTMATH
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
 from tanbench.filters.trig import sin_cos
@@ -46,7 +48,7 @@ N_MPF = 7
 REG_COLS = np.array([E, N, PSI], dtype=np.int64)
 
 
-@nb.njit(cache=True, fastmath=FASTMATH)
+@nb.njit(cache=True)
 def mpf_propagate(x, inc, yaw_nav0, noise, sig_pos, q_psi, q_eps, q_b):
     """Move particles and their Kalman filters over one interval; ``noise`` (M, 3) standard normals."""
     for j in range(x.shape[0]):
@@ -86,7 +88,7 @@ def mpf_propagate_numpy(x, inc, yaw_nav0, noise, sig_pos, q_psi, q_eps, q_b):
     return x
 
 
-@nb.njit(cache=True, fastmath=FASTMATH)
+@nb.njit(cache=True)
 def mpf_loglik_update(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, out):
     """Marginal log-likelihood of the beams per particle into ``out`` (b integrated out); then the
     depth-bias KF update. ``offsets_k`` (m, 3) beams with the navigation attitude. Returns the best
