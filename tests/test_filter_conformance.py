@@ -105,8 +105,8 @@ MAY_BE_NAN = {m: {"nees", "pcrb_horizontal_m", "pcrb_heading_deg"} for m in METH
 def check_finite(result, method):
     for k, a in result.series.items():
         a = np.asarray(a)
-        if k == "ess" and np.isnan(a).all():
-            continue  # a method without particles (grid, Kalman, batch) reports no ESS
+        if k in ("ess", "cov_en") and np.isnan(a).all():
+            continue  # optional outputs a method does not report (no particles, no cross-covariance)
         if a.dtype.kind == "f" and k not in MAY_BE_NAN.get(method, set()):
             assert np.isfinite(a).all(), f"{method}: series {k} has NaN/inf"
     for k in ("final_horizontal_error_m", "mean_horizontal_error_m", "final_heading_error_deg"):
