@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline predict check-fast scaling clean
+.PHONY: run test bench paper baseline predict methods check-fast scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -44,6 +44,13 @@ predict: $(VENV)/.installed-run
 	$(TB) terrain suitability configs/zhou2017.yaml --out results/suitability --track
 	$(TB) terrain suitability configs/monterey.yaml --out results/suitability --track
 	$(TB) predict results/zhou2017 results/monterey --out results/prediction
+
+## methods: every estimator (PFs, PMF, MPF, IEKF, TERCOM) over areas A, B and Monterey at three budgets
+## into results/methods (tables with error statistics, divergence rate and filter wall time; the
+## accuracy-cost figure results/methods/figures/accuracy_cost.png). RUNS=n overrides the sweep's 20.
+methods: $(VENV)/.installed-run
+	$(TB) run configs/methods.yaml --out results/methods --force --quiet --workers 2 $(if $(RUNS),--runs $(RUNS))
+	$(TB) plot results/methods --frontier
 
 ## bench: speed of every method, numpy vs fast random numbers, kernels (printed, never asserted)
 bench: $(VENV)/.installed-run

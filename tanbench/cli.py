@@ -430,10 +430,13 @@ def plot(
     cell: Optional[list[str]] = typer.Option(
         None, "--cell", help="Cell id (or a unique prefix) to draw; repeat for several, 'all' for every cell "
                              "[default: the first cell of each area]."),
+    frontier: bool = typer.Option(False, "--frontier",
+                                  help="Only the accuracy-cost figure: mean final error against filter wall "
+                                       "time per run, per method and cell."),
 ):
-    from tanbench.plot import plot_results
+    from tanbench.plot import plot_frontier, plot_results
 
-    written = plot_results(directory, cell)
+    written = [plot_frontier(directory)] if frontier else plot_results(directory, cell)
     typer.echo(f"wrote {len(written)} figure(s) under {directory / 'figures'}")
 
 
@@ -486,7 +489,8 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
         ratio = base[r["method"]] / r["ns_per_unit_cpu"]
         frac = "" if r["resampled_fraction"] is None else f"  resampled {100 * r['resampled_fraction']:.0f} %"
         typer.echo(f"  {key[0]:<22} random_numbers={key[1]:<5} {r['ns_per_unit_cpu']:7.1f} / "
-                   f"{r['ns_per_unit_wall']:7.1f} ns   run {r['run_wall_s']:6.2f} s   x{ratio:4.2f} vs numpy{frac}")
+                   f"{r['ns_per_unit_wall']:7.1f} ns   run {r['run_wall_s']:6.2f} s "
+                   f"({1e6 * r['run_wall_s'] / figures['updates']:7.1f} us per update)   x{ratio:4.2f} vs numpy{frac}")
     for method, step in figures["steps"].items():
         typer.echo(f"  {method}: one update step jitted {step['step_jit_us']:.0f} us, numpy reference "
                    f"{step['step_numpy_us']:.0f} us: numpy / jitted = {step['numpy_ratio']:.1f} x")

@@ -32,7 +32,17 @@ LOOSE_SERIES = COMMON_SERIES | {"position_fix"}
 
 
 def series_keys(method: str) -> set:
-    return TIGHT_SERIES if method.startswith("tight") else LOOSE_SERIES
+    """The series a method's scored run has: the common ones, var_u / var_heading for methods that
+    estimate up / heading, and the record's own series."""
+    from tanbench.methods.registry import get
+
+    record = get(method)
+    keys = COMMON_SERIES | set(record.series)
+    if "up" in record.states:
+        keys |= {"var_u"}
+    if "heading" in record.states:
+        keys |= {"var_heading"}
+    return keys
 
 
 def short_scenario(duration_s: float = 120.0, particles: int = 400, **overrides) -> Scenario:
