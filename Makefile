@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline predict methods check-fast scaling clean
+.PHONY: run test bench paper baseline predict methods ablations monterey check-fast scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -30,11 +30,13 @@ test: $(VENV)/.installed-test
 
 ## baseline: refresh results/ci-baseline after a deliberate change (say why in the commit message)
 baseline: $(VENV)/.installed-run
-	$(TB) run configs/ci.yaml --out results/ci-baseline --force --quiet
+	rm -rf results/ci-baseline
+	$(TB) run configs/ci.yaml --out results/ci-baseline --quiet
 
 ## paper: reproduce Zhou et al. 2017 into results/zhou2017 (runs, tables, figures, REPORT.md)
 paper: $(VENV)/.installed-run
-	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --force --quiet
+	rm -rf results/zhou2017
+	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --quiet
 	$(TB) plot results/zhou2017
 	$(TB) report results/zhou2017
 
@@ -49,8 +51,19 @@ predict: $(VENV)/.installed-run
 ## into results/methods (tables with error statistics, divergence rate and filter wall time; the
 ## accuracy-cost figure results/methods/figures/accuracy_cost.png). RUNS=n overrides the sweep's 20.
 methods: $(VENV)/.installed-run
-	$(TB) run configs/methods.yaml --out results/methods --force --quiet --workers 2 $(if $(RUNS),--runs $(RUNS))
+	rm -rf results/methods
+	$(TB) run configs/methods.yaml --out results/methods --quiet --workers 2 $(if $(RUNS),--runs $(RUNS))
 	$(TB) plot results/methods --frontier
+
+## ablations: area A defaults with one of tanbench's modelling or filter choices switched at a time
+ablations: $(VENV)/.installed-run
+	rm -rf results/zhou2017-ablations
+	$(TB) run configs/zhou2017-ablations.yaml --out results/zhou2017-ablations --quiet --series none
+
+## monterey: the methods over the real Monterey Canyon tiles in ../shared/data/monterey (read in place)
+monterey: $(VENV)/.installed-run
+	rm -rf results/monterey
+	$(TB) run configs/monterey.yaml --out results/monterey --quiet
 
 ## bench: speed of every method, numpy vs fast random numbers, kernels (printed, never asserted)
 bench: $(VENV)/.installed-run
