@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline clean
+.PHONY: run test bench paper realism baseline clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +37,10 @@ paper: $(VENV)/.installed-run
 	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --force --quiet
 	$(TB) plot results/zhou2017
 	$(TB) report results/zhou2017
+
+## realism: each everyday fault alone against the fault-free cell into results/realism (tables)
+realism: $(VENV)/.installed-run
+	$(TB) run configs/realism.yaml --out results/realism --force --quiet
 
 ## bench: speed figures of the tight-dvl filter (printed, never asserted)
 bench: $(VENV)/.installed-run

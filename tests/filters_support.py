@@ -24,15 +24,18 @@ COMMON_SERIES = {
     "t", "est_e", "est_n", "est_u", "est_heading_deg", "truth_e", "truth_n", "truth_u",
     "truth_heading_deg", "nav_e", "nav_n", "nav_heading_deg", "east_error_m", "north_error_m",
     "horizontal_error_m", "heading_error_deg", "nav_horizontal_error_m", "ess", "reinit",
-    "var_e", "var_n",
+    "var_e", "var_n", "healthy",
 }
 TIGHT_SERIES = COMMON_SERIES | {"var_u", "var_heading", "var_pitch", "var_roll", "var_yaw", "var_bias_x", "var_bias_z",
                                 "bias_x_deg_h", "bias_z_deg_h"}
-LOOSE_SERIES = COMMON_SERIES | {"position_fix"}
+LOOSE_FIX_ONLY_SERIES = COMMON_SERIES | {"position_fix"}
+LOOSE_SERIES = LOOSE_FIX_ONLY_SERIES | {"var_yaw", "var_heading", "fix_accepted", "fix_rejected", "bias_z_deg_h"}  # kalman-feedback
 
 
-def series_keys(method: str) -> set:
-    return TIGHT_SERIES if method.startswith("tight") else LOOSE_SERIES
+def series_keys(method: str, loose_architecture: str = "kalman-feedback") -> set:
+    if method.startswith("tight"):
+        return TIGHT_SERIES
+    return LOOSE_SERIES if loose_architecture == "kalman-feedback" else LOOSE_FIX_ONLY_SERIES
 
 
 def short_scenario(duration_s: float = 120.0, particles: int = 400, **overrides) -> Scenario:
