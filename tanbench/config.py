@@ -262,6 +262,8 @@ class FilterSpec(_Strict):
     loose_fix_floor_m: float = new_option(1.0, ge=0, description="loose TAN: std added to a fix's own")
     loose_fix_max_std_m: float = new_option(
         25.0, gt=0, description="loose TAN: a window's terrain-only fix weaker than this is not used")
+    loose_fix_misses: int = new_option(
+        3, ge=1, description="loose TAN: fixes rejected in a row after which the navigation KF is reopened")
     map_aware_likelihood: bool = new_option(
         True, neutral=False, description="beam variance + map representation error + declared map error [false]")
     map_slope_factor: float = new_option(0.2887, ge=0, description="c in (c |grad h| res)^2; 1/sqrt(12)")

@@ -106,6 +106,22 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
 
 
 @nb.njit(cache=True)
+def reopen_kf(p_kf, p0_pos, p0_yaw):
+    """Recovery of a locked-out navigation KF (``kf.misses`` fixes rejected in a row: the
+    healthy terrain PF and the KF disagree persistently, so the KF is the overconfident
+    one): position variances back to the initial ones, heading variance to at least a
+    quarter of the initial (half its std), their correlations dropped; the bias keeps its own."""
+    for i in range(N_ERROR):
+        if i != EB:
+            for j in range(N_ERROR):
+                p_kf[i, j] = 0.0
+                p_kf[j, i] = 0.0
+    p_kf[EE, EE] = p0_pos
+    p_kf[EN, EN] = p0_pos
+    p_kf[EPSI, EPSI] = 0.25 * p0_yaw
+
+
+@nb.njit(cache=True)
 def _open_window(m_prior, p_prior, centre_e, centre_n, half_side):
     """The prior of a (re)initialised cloud: the uniform square's mean and covariance."""
     m_prior[0] = centre_e
@@ -171,6 +187,9 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     bad = 0
     good = 0
     since_fix = 0
+    rejections = 0  # fixes rejected by the gate in a row
+    p0_pos = p_kf[EE, EE]
+    p0_yaw = p_kf[EPSI, EPSI]
     locked = False  # the cloud has converged since the last (re)initialisation
     consistent_chi = (0.5 * div.sigma) ** 2
     for k in range(steps):
@@ -228,7 +247,13 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
                 chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
+                if not chi2 < kf.gate:
+                    rejections += 1
+                    if rejections >= kf.misses:  # the KF is locked out: reopen it and take the fix
+                        reopen_kf(p_kf, p0_pos, p0_yaw)
+                        chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
                 if chi2 < kf.gate:
+                    rejections = 0
                     nav[0, E] += dx[EE]
                     nav[0, N] += dx[EN]
                     nav[0, YAW] += dx[EPSI]

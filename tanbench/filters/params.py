@@ -42,5 +42,6 @@ Guard = namedtuple("Guard", "spread_limit healthy_std bounds")
 
 # the closed-loop loose TAN's navigation KF (navigation/eskf.py): process noise std per
 # update (position, heading, z-gyro bias), a fix every ``fix_every`` updates, chi-square
-# gate, std added to a fix, and the weakest terrain-only fix used
-LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std")
+# gate, std added to a fix, the weakest terrain-only fix used, and the gate rejections in
+# a row after which the KF is reopened
+LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses")

@@ -73,7 +73,7 @@ def _run_kalman_feedback(ctx, x, offsets, model, out_en, var, ess, reinit, fixed
     q_bias = s.gyro_bias_instability_deg_h * DEG_PER_H * math.sqrt(2.0 * T / s.gyro_bias_corr_time_s)
     kf = LooseKalman(f.process_noise_velocity_mps * T, s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
                      q_bias, max(1, int(round(f.loose_fix_interval_s / T))), f.loose_fix_gate, f.loose_fix_floor_m,
-                     f.loose_fix_max_std_m)
+                     f.loose_fix_max_std_m, f.loose_fix_misses)
     out_en[0] = nav.pos[upd[0], :2]
     out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
