@@ -254,7 +254,7 @@ class FilterSpec(_Strict):
     loose_converged_std_m: float = Field(10.0, gt=0, description="loose filter: std for a position fix")
     convergence_threshold_m: float = Field(20.0, gt=0)
     divergence_threshold_m: float = Field(75.0, gt=0)
-    # recommended settings (docs/model.md, Section 6.4); the paper's plain reading in brackets
+    # recommended settings (docs/model.md, Section 6.3); the paper's plain reading in brackets
     loose_architecture: choices(LOOSE_ARCHITECTURE) = new_option(
         "kalman-feedback", neutral="fix-only", description="loose TAN: fixes to the navigation KF, closed loop [fix-only]")
     loose_fix_interval_s: float = new_option(10.0, gt=0, description="loose TAN: time between fixes to the KF")
@@ -373,6 +373,16 @@ class Scenario(_Strict):
 
     def world_key(self) -> str:
         d = self.identity()
+        return stable_hash({k: d[k] for k in (*WORLD_SECTIONS, "model_version") if k in d})
+
+    def pairing_key(self) -> str:
+        """The world key without the world faults: what seeds a run's vehicle data, so a cell
+        with a fault switched on shares its random numbers (sensor noise, initial errors)
+        with the fault-free cell, and the fault's effect is measured on paired runs. Equal
+        to :meth:`world_key` without faults."""
+        d = self.identity()
+        d.pop("faults", None)
+        d["terrain"] = {k: v for k, v in d["terrain"].items() if k != "map_error_correlation_m"}
         return stable_hash({k: d[k] for k in (*WORLD_SECTIONS, "model_version") if k in d})
 
     def cell_key(self) -> str:

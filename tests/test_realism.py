@@ -295,6 +295,16 @@ def test_faults_off_is_the_default_world():
     np.testing.assert_array_equal(a.obs.nav.pos, b.obs.nav.pos)
 
 
+def test_fault_cells_are_paired_with_the_fault_free_cell():
+    """The vehicle seed leaves the faults out (pairing key), the world cache key does not."""
+    plain = short_scenario(**SHORT)
+    for faulty in (short_scenario(**SHORT, faults=dict(current_east_mps=0.2)),
+                   short_scenario(**SHORT, terrain=dict(map_error_correlation_m=50.0))):
+        assert faulty.pairing_key() == plain.pairing_key() and faulty.world_key() != plain.world_key()
+    assert plain.pairing_key() == plain.world_key()
+    assert short_scenario(**SHORT, trajectory=dict(speed_mps=1.5)).pairing_key() != plain.pairing_key()
+
+
 def test_outliers_change_only_a_fraction_of_ranges():
     base, faulty, a, b = _pair(outlier_fraction=0.05)
     changed = a.obs.dvl_ranges != b.obs.dvl_ranges

@@ -143,7 +143,7 @@ def loglik_loose_numpy(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside
 
 
 # --------------------------------------------------------------------------------------
-# Map-aware, robust likelihoods (docs/model.md, Section 6.4)
+# Map-aware, robust likelihoods (docs/model.md, Section 6.3)
 #
 # Each beam's variance is the sonar's plus the navigation map's variance at the beam's
 # footprint (``terrain/representation.py``: slope x resolution plus the declared map

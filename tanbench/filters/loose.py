@@ -1,18 +1,20 @@
-"""Loosely coupled TAN (Melo & Matos Section 5, after Hagen et al. 2011): the baseline.
+"""Loosely coupled TAN (Melo & Matos Section 5, after Hagen et al. 2011): two loops.
 
-The terrain measurements are processed in a separate particle filter over horizontal
-position only, driven by the navigation system's position increments; its beams are
-projected with the navigation system's attitude (it has no attitude or bias states).
-Its process noise is Table 2's plus, by default, the cross-track error the navigation
-system's heading uncertainty (the same prior the tight filter starts from, 30 deg)
-causes on each increment: without it a position-only filter cannot follow a track
-dead-reckoned with a wrong heading, and its fixes make the navigation worse than none.
-While the filter has converged (horizontal std below ``converged_std`` and its best
-particle fitting the terrain within half the divergence threshold, for ``div_steps``
-updates in a row), its estimate is fed back to the navigation system as a position fix; the method's output is the
-navigation system corrected by the latest fix. The navigation system keeps its own
-heading, so a heading error is never corrected, only the position it has caused.
-Divergence, resampling and regularisation are handled as in the tight filter.
+* :func:`loose_kalman_loop` (``filter.loose_architecture: kalman-feedback``, recommended):
+  a position-only particle filter whose terrain-only fixes go to an error-state Kalman
+  filter of the navigation system (``navigation/eskf.py``: position, heading, z-gyro
+  bias); the corrected navigation drives the PF (closed loop). docs/model.md, Section 6.2.
+* :func:`loose_filter_loop` (``fix-only``, the earlier baseline): the PF is driven by the
+  navigation system's position increments with Table 2's process noise plus the
+  cross-track error the 30 deg heading prior causes on each increment; while it has
+  converged (horizontal std below ``converged_std`` and its best particle fitting the
+  terrain within half the divergence threshold, for ``div_steps`` updates in a row), its
+  estimate is fed back to the navigation system as a position fix; the output is the
+  navigation system corrected by the latest fix. Its heading is never corrected.
+
+Beams are projected with the navigation system's attitude (turned by the corrected
+heading in the closed loop). Divergence, resampling and regularisation as in the tight
+filter.
 """
 
 from __future__ import annotations
