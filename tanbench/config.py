@@ -259,7 +259,7 @@ class FilterSpec(_Strict):
         "kalman-feedback", neutral="fix-only", description="loose TAN: fixes to the navigation KF, closed loop [fix-only]")
     loose_fix_interval_s: float = new_option(10.0, gt=0, description="loose TAN: time between fixes to the KF")
     loose_fix_gate: float = new_option(13.8, gt=0, description="loose TAN: chi-square (2 dof) gate on fixes")
-    loose_fix_floor_m: float = new_option(1.0, ge=0, description="loose TAN: std added to a fix's own")
+    loose_fix_floor_m: float = new_option(5.0, ge=0, description="loose TAN: std added to a fix's own")
     loose_fix_max_std_m: float = new_option(
         25.0, gt=0, description="loose TAN: a window's terrain-only fix weaker than this is not used")
     loose_fix_misses: int = new_option(

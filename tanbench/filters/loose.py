@@ -108,6 +108,20 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
 
 
 @nb.njit(cache=True)
+def position_reset(p_kf, r):
+    """The first fix after a (re)initialisation sets the position: P_pp = R, the position's
+    correlations with heading and bias dropped (a single fix cannot tell an initial
+    position error from a heading error; heading is learnt from the fixes that follow)."""
+    for i in range(N_ERROR):
+        p_kf[EE, i] = p_kf[i, EE] = 0.0
+        p_kf[EN, i] = p_kf[i, EN] = 0.0
+    p_kf[EE, EE] = r[0, 0]
+    p_kf[EE, EN] = r[0, 1]
+    p_kf[EN, EE] = r[1, 0]
+    p_kf[EN, EN] = r[1, 1]
+
+
+@nb.njit(cache=True)
 def reopen_kf(p_kf, p0_pos, p0_yaw):
     """Recovery of a locked-out navigation KF (``kf.misses`` fixes rejected in a row: the
     healthy terrain PF and the KF disagree persistently, so the KF is the overconfident
@@ -190,6 +204,7 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     good = 0
     since_fix = 0
     rejections = 0  # fixes rejected by the gate in a row
+    first_fix = True  # the next fix resets the position (after the start or a PF reinitialisation)
     p0_pos = p_kf[EE, EE]
     p0_yaw = p_kf[EPSI, EPSI]
     locked = False  # the cloud has converged since the last (re)initialisation
@@ -248,21 +263,28 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
             if terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r):
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
-                chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
-                if not chi2 < kf.gate:
-                    rejections += 1
-                    if rejections >= kf.misses:  # the KF is locked out: reopen it and take the fix
-                        reopen_kf(p_kf, p0_pos, p0_yaw)
-                        chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
-                if chi2 < kf.gate:
-                    rejections = 0
-                    nav[0, E] += dx[EE]
-                    nav[0, N] += dx[EN]
-                    nav[0, YAW] += dx[EPSI]
-                    nav[0, BZ] += dx[EB]
+                if first_fix:  # position reset: one fix cannot tell an initial position error from heading
+                    position_reset(p_kf, r)
+                    nav[0, E] = zt[0]
+                    nav[0, N] = zt[1]
+                    first_fix = False
                     fixed_out[k] = 1
                 else:
-                    rejected_out[k] = 1
+                    chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
+                    if not chi2 < kf.gate:
+                        rejections += 1
+                        if rejections >= kf.misses:  # the KF is locked out: reopen it and take the fix
+                            reopen_kf(p_kf, p0_pos, p0_yaw)
+                            chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
+                    if chi2 < kf.gate:
+                        rejections = 0
+                        nav[0, E] += dx[EE]
+                        nav[0, N] += dx[EN]
+                        nav[0, YAW] += dx[EPSI]
+                        nav[0, BZ] += dx[EB]
+                        fixed_out[k] = 1
+                    else:
+                        rejected_out[k] = 1
             m_prior[0] = mean[0]
             m_prior[1] = mean[1]
             for a in range(2):
@@ -287,6 +309,7 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
             bad = 0
             good = 0
             locked = False
+            first_fix = True
             _open_window(m_prior, p_prior, nav[0, E], nav[0, N], half_side)
             reinit_out[k] = 1
             continue
