@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline predict methods ablations monterey check-fast scaling clean
+.PHONY: run test bench paper baseline predict methods ablations monterey realism check-fast scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -64,6 +64,11 @@ ablations: $(VENV)/.installed-run
 monterey: $(VENV)/.installed-run
 	rm -rf results/monterey
 	$(TB) run configs/monterey.yaml --out results/monterey --quiet
+
+## realism: each everyday fault alone against the fault-free cell into results/realism (tables)
+realism: $(VENV)/.installed-run
+	rm -rf results/realism
+	$(TB) run configs/realism.yaml --out results/realism --quiet
 
 ## bench: speed of every method, numpy vs fast random numbers, kernels (printed, never asserted)
 bench: $(VENV)/.installed-run

@@ -26,9 +26,6 @@ COMMON_SERIES = {
     "horizontal_error_m", "heading_error_deg", "nav_horizontal_error_m", "ess", "reinit",
     "var_e", "var_n", "cov_en", "nees", "pcrb_horizontal_m", "pcrb_heading_deg",
 }
-TIGHT_SERIES = COMMON_SERIES | {"var_u", "var_heading", "var_pitch", "var_roll", "var_yaw", "var_bias_x", "var_bias_z",
-                                "bias_x_deg_h", "bias_z_deg_h"}
-LOOSE_SERIES = COMMON_SERIES | {"position_fix"}
 
 
 def series_keys(method: str) -> set:

@@ -29,3 +29,19 @@ TightPrior = namedtuple("TightPrior", "half_side std_up std_att std_yaw std_bias
 # loose filter: position process noise, heading-induced cross-track noise, altitude std,
 # off-map innovation, and the horizontal std below which its estimate is a position fix
 LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma converged_std")
+
+# measurement model of the map-aware kernels (filters/likelihood.py): use them (``mapaware``),
+# beam density code (``kind``, options.LIKELIHOOD) and Student-t degrees of freedom ``nu``,
+# and the map's representation-variance grid ``mvar`` (terrain/representation.py)
+Likelihood = namedtuple("Likelihood", "mapaware kind nu mvar")
+
+# divergence guards: a horizontal cloud std above ``spread_limit`` m (once converged) counts
+# as a bad update; a cloud std below ``healthy_std`` with a good fit is "healthy" (recovery
+# statistics); the estimate is kept in ``bounds`` (e_min, e_max, n_min, n_max), off if e_min > e_max
+Guard = namedtuple("Guard", "spread_limit healthy_std bounds")
+
+# the closed-loop loose TAN's navigation KF (navigation/eskf.py): process noise std per
+# update (position, heading, z-gyro bias), a fix every ``fix_every`` updates, chi-square
+# gate, std added to a fix, the weakest terrain-only fix used, and the gate rejections in
+# a row after which the KF is reopened
+LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses")

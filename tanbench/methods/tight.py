@@ -15,7 +15,7 @@ from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
 
 TIGHT_STATES = ("east", "north", "up", "pitch", "roll", "heading", "gyro_bias_x", "gyro_bias_z")
-TIGHT_SERIES = ("var_pitch", "var_roll", "var_bias_x", "var_bias_z", "bias_x_deg_h", "bias_z_deg_h")
+TIGHT_SERIES = ("var_pitch", "var_roll", "var_bias_x", "var_bias_z", "bias_x_deg_h", "bias_z_deg_h", "healthy")
 
 
 def resampling_bundle(f, regularised_cols: np.ndarray):
@@ -26,6 +26,32 @@ def resampling_bundle(f, regularised_cols: np.ndarray):
     size = f.roughening if f.regularisation == "gordon" else f.regularisation_h
     return Resampling(RESAMPLING[f.resampling], f.ess_threshold, REGULARISATION[f.regularisation],
                       regularised_cols, size, f.min_spread_m)
+
+
+def likelihood_bundle(f, nmap):
+    """The :class:`~tanbench.filters.params.Likelihood` bundle: the map-aware kernels run when
+    the map-aware variance or a non-Gaussian density is asked for; the variance grid is
+    the map's representation variance with the map's declared error
+    (``filter.map_aware_likelihood``), else zero (terrain/representation.py)."""
+    from tanbench.filters.params import Likelihood
+    from tanbench.options import LIKELIHOOD
+    from tanbench.terrain.representation import map_variance_grid
+
+    mapaware = f.map_aware_likelihood or f.likelihood != "gaussian"
+    if f.map_aware_likelihood:
+        mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    else:
+        mvar = np.where(np.isnan(nmap.z), np.nan, 0.0) if mapaware else np.zeros((2, 2))
+    return Likelihood(bool(mapaware), LIKELIHOOD[f.likelihood], float(f.student_nu), mvar)
+
+
+def guard_bundle(f, nmap):
+    """The :class:`~tanbench.filters.params.Guard` bundle (spread divergence, keep on map)."""
+    from tanbench.filters.params import Guard
+
+    bounds = np.array([nmap.e0, nmap.e_max, nmap.n0, nmap.n_max]) if f.keep_on_map else np.array([1.0, 0.0, 0.0, 0.0])
+    spread = float(f.divergence_spread_m) if f.divergence_spread_m is not None else np.inf
+    return Guard(spread, f.loose_converged_std_m, bounds)
 
 
 def divergence_bundle(f):
@@ -64,18 +90,20 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
                nav.yaw[k0], prior)
     k = upd.size
     est, var, cov_en = np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k)
-    ess, reinit = np.empty(k), np.zeros(k, dtype=np.int64)
+    ess, reinit, healthy = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
     tight_filter_loop(x, rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                       np.ascontiguousarray(ranges), np.ascontiguousarray(beams), ctx.nmap.kernel_args(), model,
                       resampling_bundle(f, REGULARISED_STATES[f.regularised_states]), divergence_bundle(f), prior,
-                      est, var, cov_en, ess, reinit)
+                      likelihood_bundle(f, ctx.nmap), guard_bundle(f, ctx.nmap), est, var, cov_en, ess, reinit,
+                      healthy)
     return MethodOutput(
         east=est[:, 0], north=est[:, 1], up=est[:, U], yaw=est[:, YAW],
         var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en, var_u=var[:, U], var_heading=np.degrees(np.sqrt(var[:, YAW])) ** 2,
         ess=ess, reinit=reinit.astype(bool),
         extra={"var_pitch": var[:, PITCH], "var_roll": var[:, ROLL], "var_yaw": var[:, YAW],
                "var_bias_x": var[:, 6], "var_bias_z": var[:, 7],
-               "bias_x_deg_h": est[:, 6] / DEG_PER_H, "bias_z_deg_h": est[:, 7] / DEG_PER_H})
+               "bias_x_deg_h": est[:, 6] / DEG_PER_H, "bias_z_deg_h": est[:, 7] / DEG_PER_H,
+               "healthy": healthy.astype(float)})
 
 
 def run_tight_dvl(ctx: MethodContext) -> MethodOutput:

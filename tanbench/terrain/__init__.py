@@ -90,4 +90,5 @@ def _navigation_cached(key: str, resolution_m: float) -> Map:
     from tanbench.terrain.derive import derive_navigation_map
 
     spec = TerrainSpec(**json.loads(key))
-    return derive_navigation_map(_truth(key), resolution_m, spec.map_error_m, spec.seed)
+    return derive_navigation_map(_truth(key), resolution_m, spec.map_error_m, spec.seed,
+                                 spec.map_error_correlation_m)
