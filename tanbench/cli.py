@@ -257,7 +257,7 @@ def simulate(
                f"heading error {vehicle.initial_heading_error_deg:+.0f} deg at start, "
                f"{(df['nav_heading_deg'] - df['truth_heading_deg'] + 180).mod(360).iloc[-1] - 180:+.1f} deg at end")
     if out is not None:
-        from tanbench.runner import store
+        from tanbench import store
 
         try:
             if out.suffix.lower() == ".csv":

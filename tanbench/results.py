@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from tanbench.errors import TanbenchError
-from tanbench.runner import store
+from tanbench import store
 
 # the scenario columns every table shows (the paper's Tables 3-7 columns)
 TABLE_SCENARIO_COLUMNS = ["area", "map_resolution_m", "noise_m", "sampling_time_s", "particles"]

@@ -26,7 +26,7 @@ import pandas as pd
 
 from tanbench.config import Scenario, flatten
 from tanbench.errors import TanbenchError
-from tanbench.runner import store
+from tanbench import store
 from tanbench.runner.sweep import Sweep
 from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.schema import rows_table
