@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper baseline predict methods ablations monterey realism check-fast scaling clean
+.PHONY: run test bench paper report baseline predict methods ablations monterey realism check-fast scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -54,6 +54,11 @@ methods: $(VENV)/.installed-run
 	rm -rf results/methods
 	$(TB) run configs/methods.yaml --out results/methods --quiet --workers 2 $(if $(RUNS),--runs $(RUNS))
 	$(TB) plot results/methods --frontier
+
+## report: redraw results/zhou2017's figures and rewrite its REPORT.md from the stored runs
+report: $(VENV)/.installed-run
+	$(TB) plot results/zhou2017
+	$(TB) report results/zhou2017
 
 ## ablations: area A defaults with one of tanbench's modelling or filter choices switched at a time
 ablations: $(VENV)/.installed-run
