@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 
-.PHONY: run test bench paper paper-literal anatomy baseline predict clean
+.PHONY: run test bench paper paper-literal anatomy report baseline predict methods ablations monterey realism check-fast scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -30,11 +30,13 @@ test: $(VENV)/.installed-test
 
 ## baseline: refresh results/ci-baseline after a deliberate change (say why in the commit message)
 baseline: $(VENV)/.installed-run
-	$(TB) run configs/ci.yaml --out results/ci-baseline --force --quiet
+	rm -rf results/ci-baseline
+	$(TB) run configs/ci.yaml --out results/ci-baseline --quiet
 
 ## paper: reproduce Zhou et al. 2017 into results/zhou2017 (runs, tables, figures, REPORT.md)
 paper: $(VENV)/.installed-run
-	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --force --quiet
+	rm -rf results/zhou2017
+	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --quiet
 	$(TB) plot results/zhou2017
 	$(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
 
@@ -60,10 +62,51 @@ predict: $(VENV)/.installed-run
 	$(TB) terrain suitability configs/monterey.yaml --out results/suitability --track
 	$(TB) predict results/zhou2017 results/monterey --out results/prediction
 
-## bench: speed figures of the tight-dvl filter (printed, never asserted)
+## methods: every estimator (PFs, PMF, MPF, IEKF, TERCOM) over areas A, B and Monterey at three budgets
+## into results/methods (tables with error statistics, divergence rate and filter wall time; the
+## accuracy-cost figure results/methods/figures/accuracy_cost.png). RUNS=n overrides the sweep's 20.
+methods: $(VENV)/.installed-run
+	rm -rf results/methods
+	$(TB) run configs/methods.yaml --out results/methods --quiet --workers 2 $(if $(RUNS),--runs $(RUNS))
+	$(TB) plot results/methods --frontier
+
+## report: redraw results/zhou2017's figures and rewrite its REPORT.md from the stored runs
+report: $(VENV)/.installed-run
+	$(TB) plot results/zhou2017
+	$(TB) report results/zhou2017
+
+## ablations: area A defaults with one of tanbench's modelling or filter choices switched at a time
+ablations: $(VENV)/.installed-run
+	rm -rf results/zhou2017-ablations
+	$(TB) run configs/zhou2017-ablations.yaml --out results/zhou2017-ablations --quiet --series none
+
+## monterey: the methods over the real Monterey Canyon tiles in ../shared/data/monterey (read in place)
+monterey: $(VENV)/.installed-run
+	rm -rf results/monterey
+	$(TB) run configs/monterey.yaml --out results/monterey --quiet
+
+## realism: each everyday fault alone against the fault-free cell into results/realism (tables)
+realism: $(VENV)/.installed-run
+	rm -rf results/realism
+	$(TB) run configs/realism.yaml --out results/realism --quiet
+
+## bench: speed of every method, numpy vs fast random numbers, kernels (printed, never asserted)
 bench: $(VENV)/.installed-run
 	$(TB) bench
 
+## check-fast: the CI sweep with filter.random_numbers: fast, checked against results/ci-baseline
+check-fast: $(VENV)/.installed-run
+	$(TB) run configs/ci.yaml --out results/ci-numpy --force --quiet
+	$(TB) run configs/ci-fast.yaml --out results/ci-fast --force --quiet
+	$(TB) check results/ci-numpy results/ci-baseline --report results/ci-numpy/check.md
+	$(TB) check results/ci-fast results/ci-baseline --report results/ci-fast/check.md
+
+## scaling: wall time of configs/quick.yaml on 1 and 2 workers (run on an otherwise idle machine)
+scaling: $(VENV)/.installed-run
+	$(TB) run configs/quick.yaml --out results/scaling-1 --force --quiet --workers 1
+	$(TB) run configs/quick.yaml --out results/scaling-2 --force --quiet --workers 2
+	@$(BIN)/python -c "import json; w = [json.loads(open(f'results/scaling-{n}/sessions.jsonl').readlines()[-1])['wall_s'] for n in (1, 2)]; print(f'1 worker {w[0]:.1f} s, 2 workers {w[1]:.1f} s: {w[0] / w[1]:.2f}x')"
+
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick results/ci
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick results/ci results/ci-numpy results/ci-fast results/scaling-1 results/scaling-2
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -262,7 +262,7 @@ def simulate(
                f"heading error {vehicle.initial_heading_error_deg:+.0f} deg at start, "
                f"{(df['nav_heading_deg'] - df['truth_heading_deg'] + 180).mod(360).iloc[-1] - 180:+.1f} deg at end")
     if out is not None:
-        from tanbench.runner import store
+        from tanbench import store
 
         try:
             if out.suffix.lower() == ".csv":
@@ -435,10 +435,13 @@ def plot(
     cell: Optional[list[str]] = typer.Option(
         None, "--cell", help="Cell id (or a unique prefix) to draw; repeat for several, 'all' for every cell "
                              "[default: the first cell of each area]."),
+    frontier: bool = typer.Option(False, "--frontier",
+                                  help="Only the accuracy-cost figure: mean final error against filter wall "
+                                       "time per run, per method and cell."),
 ):
-    from tanbench.plot import plot_results
+    from tanbench.plot import plot_frontier, plot_results
 
-    written = plot_results(directory, cell)
+    written = [plot_frontier(directory)] if frontier else plot_results(directory, cell)
     typer.echo(f"wrote {len(written)} figure(s) under {directory / 'figures'}")
 
 
@@ -484,7 +487,7 @@ def predict(
 def anatomy(directory: Path = typer.Argument(..., help="Results directory of an anatomy sweep.")):
     from tanbench.anatomy import anatomy_markdown, anatomy_table
     from tanbench.results import load
-    from tanbench.runner import store
+    from tanbench import store
     from tanbench.runner.sweep import load_results_sweep
 
     table = anatomy_table(load(directory), load_results_sweep(directory))
@@ -496,22 +499,35 @@ def anatomy(directory: Path = typer.Argument(..., help="Results directory of an 
     typer.echo(anatomy_markdown(table))
 
 
-@app.command(help="Benchmark the tight-dvl filter (ns per particle-step, run time, numpy ratio)."
+@app.command(help="Benchmark every method (ns per particle-step, run time, numpy ratio, kernels)."
              + EXAMPLE.format("tanbench bench --json"))
-def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON object.")):
+def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+          particles: int = typer.Option(3000, "--particles", min=16, help="Particles of the bench run."),
+          repeats: int = typer.Option(3, "--repeats", min=1, help="Runs per figure (the best is kept).")):
     from tanbench.bench import run_bench
 
-    figures = run_bench()
+    figures = run_bench(particles=particles, repeats=repeats)
     if as_json:
         typer.echo(json.dumps(figures))
         return
-    t = figures["targets"]
-    typer.echo(f"tight-dvl, {figures['particles']} particles, 4 beams, 10 m map, {figures['updates']} updates")
-    typer.echo(f"  ns per particle-step : {figures['ns_per_particle_step']:8.1f}   (target <= {t['ns_per_particle_step']})")
-    typer.echo(f"  1190 s run, filter   : {figures['run_wall_s']:8.3f} s (target <= {t['run_wall_s']})")
-    typer.echo(f"  one step jitted      : {figures['step_jit_us']:8.1f} us")
-    typer.echo(f"  one step numpy ref   : {figures['step_numpy_us']:8.1f} us")
-    typer.echo(f"  numpy / jitted       : {figures['numpy_ratio']:8.1f} x (target >= {t['numpy_ratio']})")
+    typer.echo(f"area A, 10 m map, 4 DVL beams, {figures['particles']} particles, {figures['updates']} updates "
+               f"(ns per particle-step: thread CPU / wall; best of {repeats})")
+    base = {}
+    for r in figures["runs"]:
+        key = (r["method"], r["random_numbers"])
+        base.setdefault(r["method"], r["ns_per_unit_cpu"])
+        ratio = base[r["method"]] / r["ns_per_unit_cpu"]
+        frac = "" if r["resampled_fraction"] is None else f"  resampled {100 * r['resampled_fraction']:.0f} %"
+        typer.echo(f"  {key[0]:<22} random_numbers={key[1]:<5} {r['ns_per_unit_cpu']:7.1f} / "
+                   f"{r['ns_per_unit_wall']:7.1f} ns   run {r['run_wall_s']:6.2f} s "
+                   f"({1e6 * r['run_wall_s'] / figures['updates']:7.1f} us per update)   x{ratio:4.2f} vs numpy{frac}")
+    for method, step in figures["steps"].items():
+        typer.echo(f"  {method}: one update step jitted {step['step_jit_us']:.0f} us, numpy reference "
+                   f"{step['step_numpy_us']:.0f} us: numpy / jitted = {step['numpy_ratio']:.1f} x")
+    for method, kernels in figures["kernels"].items():
+        typer.echo(f"  {method} kernels (ns per particle, thread CPU):")
+        for name, ns in kernels.items():
+            typer.echo(f"    {name:<36} {ns:7.1f}")
 
 
 def _usage_error_types() -> tuple[type, ...]:

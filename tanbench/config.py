@@ -30,8 +30,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD_R, PROPAGATION,
-                              REGULARISATION, REGULARISED_STATES, RESAMPLING, choices)
+from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD, LIKELIHOOD_R,
+                              LOOSE_ARCHITECTURE, PROPAGATION, REGULARISATION, REGULARISED_STATES, RESAMPLING,
+                              choices)
 from tanbench.paperdata import scenario_facts
 
 # Bump when a model's behaviour changes without a new option (the commit says why): every
@@ -113,6 +114,8 @@ class TerrainSpec(_Strict):
         "auto", description="synthetic layout; auto = 'vehicle-run' for area vehicle, else 'paper'")
     truth_resolution_m: float = Field(2.5, gt=0, le=10, description="synthetic truth grid spacing")
     map_error_m: float = Field(0.4, ge=0, description="std of the navigation map's node errors")
+    map_error_correlation_m: float = new_option(
+        0.0, ge=0, description="fault: correlation length of the map error field (0: i.i.d. nodes)")
     path: str | list[str] | None = Field(
         None, description="bathymetry file(s) or a glob of tiles, relative to the working directory")
     format: str | None = Field(
@@ -280,8 +283,43 @@ class FilterSpec(_Strict):
     loose_heading_noise: bool = Field(
         True, description="loose filter: cross-track process noise from the heading uncertainty")
     loose_converged_std_m: float = Field(10.0, gt=0, description="loose filter: std for a position fix")
+    random_numbers: Literal["numpy", "fast"] = new_option(
+        "numpy", description="the jitted loops' random numbers: the run's numpy Generator, or the inlined "
+                             "xoshiro256++/ziggurat generator (tanbench/filters/rng.py; another stream)")
     convergence_threshold_m: float = Field(20.0, gt=0)
     divergence_threshold_m: float = Field(75.0, gt=0)
+    # recommended settings (docs/model.md, Section 6.3); the paper's plain reading in brackets
+    loose_architecture: choices(LOOSE_ARCHITECTURE) = new_option(
+        "kalman-feedback", neutral="fix-only", description="loose TAN: fixes to the navigation KF, closed loop [fix-only]")
+    loose_fix_interval_s: float = new_option(10.0, gt=0, description="loose TAN: time between fixes to the KF")
+    loose_fix_gate: float = new_option(13.8, gt=0, description="loose TAN: chi-square (2 dof) gate on fixes")
+    loose_fix_floor_m: float = new_option(5.0, ge=0, description="loose TAN: std added to a fix's own")
+    loose_fix_max_std_m: float = new_option(
+        25.0, gt=0, description="loose TAN: a window's terrain-only fix weaker than this is not used")
+    loose_fix_misses: int = new_option(
+        3, ge=1, description="loose TAN: fixes rejected in a row after which the navigation KF is reopened")
+    map_aware_likelihood: bool = new_option(
+        True, neutral=False, description="beam variance + map representation error + declared map error [false]")
+    map_slope_factor: float = new_option(0.2887, ge=0, description="c in (c |grad h| res)^2; 1/sqrt(12)")
+    likelihood: choices(LIKELIHOOD) = new_option("student-t", neutral="gaussian", description="beam density [gaussian]")
+    student_nu: float = new_option(4.0, gt=0, description="Student-t degrees of freedom")
+    keep_on_map: bool = new_option(True, neutral=False, description="clamp the estimate into the map, reinitialise there [false]")
+    divergence_spread_m: float | None = new_option(
+        100.0, neutral=None, gt=0, description="horizontal cloud std counted as divergence [None: not checked]")
+
+
+class FaultSpec(_Strict):
+    """Everyday faults of the world (docs/model.md, Section 4.1); all off in the paper's world."""
+
+    tide_bias_m: float = Field(0.0, description="constant error of the depth reference (tide, datum), m")
+    tide_amplitude_m: float = Field(0.0, ge=0, description="amplitude of the slow sinusoidal tide, m")
+    tide_period_s: float = Field(44712.0, gt=0, description="tide period (M2: 12.42 h)")
+    current_east_mps: float = Field(0.0, ge=-3, le=3, description="ocean current, east component, m/s")
+    current_north_mps: float = Field(0.0, ge=-3, le=3, description="ocean current, north component, m/s")
+    dropout_rate_per_ping: float = Field(0.0, ge=0, lt=1, description="chance a bottom-lock dropout starts")
+    dropout_mean_pings: float = Field(10.0, ge=1, description="mean length of a dropout, pings")
+    outlier_fraction: float = Field(0.0, ge=0, lt=1, description="fraction of wild ranges")
+    sound_speed_scale_error: float = Field(0.0, gt=-0.2, lt=0.2, description="range scale error")
 
 
 class Scenario(_Strict):
@@ -300,6 +338,8 @@ class Scenario(_Strict):
     filter: FilterSpec = FilterSpec()
     method_options: dict[str, dict[str, Any]] = new_option(
         {}, description="per method: its own options (see `tanbench methods`), e.g. {pmf-dvl: {grid_m: 5}}")
+    faults: FaultSpec = new_option(FaultSpec(), neutral=FaultSpec().model_dump(mode="json"),
+                                   description="everyday faults of the world; all off by default")
 
     @model_validator(mode="after")
     def _resolve_area(self):
@@ -369,11 +409,21 @@ class Scenario(_Strict):
         d = self.identity()
         return stable_hash({k: d[k] for k in (*WORLD_SECTIONS, "model_version") if k in d})
 
+    def pairing_key(self) -> str:
+        """The world key without the world faults: what seeds a run's vehicle data, so a cell
+        with a fault switched on shares its random numbers (sensor noise, initial errors)
+        with the fault-free cell, and the fault's effect is measured on paired runs. Equal
+        to :meth:`world_key` without faults."""
+        d = self.identity()
+        d.pop("faults", None)
+        d["terrain"] = {k: v for k, v in d["terrain"].items() if k != "map_error_correlation_m"}
+        return stable_hash({k: d[k] for k in (*WORLD_SECTIONS, "model_version") if k in d})
+
     def cell_key(self) -> str:
         return stable_hash(self.identity())
 
 
-WORLD_SECTIONS = ("terrain", "area", "trajectory", "sensors", "navigation", "duration_s")
+WORLD_SECTIONS = ("terrain", "area", "trajectory", "sensors", "navigation", "duration_s", "faults")
 
 
 def _without_neutral(model: type[BaseModel], data: dict) -> dict:

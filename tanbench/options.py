@@ -12,6 +12,8 @@ from typing import Literal
 RESAMPLING = {"systematic": 0, "multinomial": 1, "stratified": 2, "residual": 3}
 REGULARISATION = {"none": 0, "liu-west": 1, "gordon": 2}
 DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}
+LIKELIHOOD = {"student-t": 1, "gaussian": 0}  # beam density of the map-aware kernels (filters/likelihood.py)
+LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")
 # which tight-filter states the regularisation jitters (state indices in filters/tight.py)
 REGULARISED_STATES = ("position-heading-biases", "heading-biases", "biases")
 

@@ -242,3 +242,52 @@ def _save(fig, path: Path, plt) -> Path:
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def frontier_points(runs):
+    """Per (world, method, cell): mean final error, mean filter wall time per run, divergence rate.
+
+    The world is the area, or "file map <name>" for a custom area on a bathymetry file.
+    """
+    ok = runs[runs["status"] == "ok"].copy()
+    stem = ok["terrain.path"].astype(str).str.extract(r"([A-Za-z]+)[^/]*$")[0].fillna("") \
+        if "terrain.path" in ok else ""
+    ok["world"] = np.where(ok["area"] == "custom", "file map " + stem, "area " + ok["area"].astype(str))
+    g = ok.groupby(["world", "method", "cell_id"], sort=False)
+    return g.agg(mean_final_error_m=("final_horizontal_error_m", "mean"),
+                 mean_filter_wall_s=("filter_wall_s", "mean"),
+                 divergence_rate=("diverged", "mean"), n_runs=("run", "size")).reset_index()
+
+
+def plot_frontier(directory, cells=None) -> Path:
+    """Accuracy against cost: mean final error against mean filter wall time per run, one panel per
+    world, one line per method through its cells (budgets) in order of cost. ``cells``: only these
+    cell ids (default: the cells of the tables named ``budget-*``, else all)."""
+    from tanbench.results import load
+
+    plt = _pyplot()
+    directory = Path(directory)
+    runs = load(directory)
+    if cells is None:
+        budget = runs["tables"].astype(str).map(lambda t: any(x.startswith("budget-") for x in t.split(",")))
+        cells = set(runs.loc[budget, "cell_id"]) if budget.any() else set(runs["cell_id"])
+    pts = frontier_points(runs[runs["cell_id"].isin(set(cells))])
+    worlds = sorted(dict.fromkeys(pts["world"]))
+    styles = method_styles(list(dict.fromkeys(pts["method"])))
+    fig, axes = plt.subplots(1, len(worlds), figsize=(5.5 * len(worlds), 4.8), squeeze=False)
+    for ax, world in zip(axes[0], worlds):
+        sub = pts[pts["world"] == world]
+        for method in dict.fromkeys(sub["method"]):
+            sm = sub[sub["method"] == method].sort_values("mean_filter_wall_s")
+            ls, color = styles[method]
+            ax.plot(sm["mean_filter_wall_s"], sm["mean_final_error_m"], marker="o", ls=ls, color=color, label=method)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("filter wall time per run (s)")
+        ax.set_ylabel("mean final horizontal error (m)")
+        ax.set_title(f"{world}: accuracy against cost")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    figdir = directory / "figures"
+    figdir.mkdir(parents=True, exist_ok=True)
+    return _save(fig, figdir / "accuracy_cost.png", plt)

@@ -125,7 +125,7 @@ def plot_prediction(cells: pd.DataFrame, path: Path) -> None:
 def write_prediction(directories, out) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The cells table, the correlations, and their files under ``out``."""
     from tanbench.results import to_markdown
-    from tanbench.runner import store
+    from tanbench import store
 
     frames = [cell_table(d) for d in directories]
     cells = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()

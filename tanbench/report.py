@@ -166,7 +166,7 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
     from tanbench.claims import evaluate
     from tanbench.paper import compare_with_paper
     from tanbench.results import load, load_series, sweep_tables
-    from tanbench.runner import store
+    from tanbench import store
     from tanbench.runner.sweep import load_results_sweep
 
     directory = Path(directory)

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from tanbench.errors import TanbenchError
-from tanbench.runner import store
+from tanbench import store
 
 # the scenario columns every table shows (the paper's Tables 3-7 columns)
 TABLE_SCENARIO_COLUMNS = ["area", "map_resolution_m", "noise_m", "sampling_time_s", "particles"]
@@ -91,8 +91,15 @@ def bootstrap_ci(values: np.ndarray, level: float = 0.95, samples: int = BOOTSTR
     return float(lo), float(hi)
 
 
-def summarize(df: pd.DataFrame, by=("cell_id", "method")) -> pd.DataFrame:
+SUMMARY_EXTRA_COLUMNS = ("divergence_rate", "mean_filter_wall_s")
+
+
+def summarize(df: pd.DataFrame, by=("cell_id", "method"), columns=()) -> pd.DataFrame:
     """Per group: n_runs and the statistics of the final and time-averaged errors.
+
+    ``columns``: further columns of :data:`SUMMARY_EXTRA_COLUMNS` (a sweep's ``table_columns``):
+    ``divergence_rate`` (n_diverged / n_runs) and ``mean_filter_wall_s`` (the filter's wall
+    time per run, s).
 
     Failed runs are counted in ``n_failed`` and left out of the statistics.
     """
@@ -121,6 +128,10 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method")) -> pd.DataFrame:
             **_consistency_columns(ok),
             **_efficiency_columns(ok),
         })
+        extra = {"divergence_rate": float(ok["diverged"].astype(bool).mean()) if f.size else np.nan,
+                 "mean_filter_wall_s": float(ok["filter_wall_s"].mean())
+                 if f.size and "filter_wall_s" in ok else np.nan}
+        rows[-1].update({c: extra[c] for c in columns})
     return pd.DataFrame(rows)
 
 
@@ -173,7 +184,7 @@ def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
         cols = TABLE_SCENARIO_COLUMNS + [p for p in extra if p in sub.columns]
         if sub.empty:
             continue
-        summary = summarize(sub, by=cols + ["method"])
+        summary = summarize(sub, by=cols + ["method"], columns=getattr(sweep.spec, "table_columns", ()))
         summary.insert(0, "table", table)
         # rows in the order the sweep file lists the design's values, then its methods
         ranks = []

@@ -22,6 +22,7 @@ METRIC_COLUMNS = (
     "final_east_error_m", "final_north_error_m", "filter_wall_s",
     # consistency (metrics.consistency) and efficiency against the bound (bounds.pcrb): metrics.run_metrics
     "nees_mean_after_convergence", "nees_above_95", "nees_below_95", "pcrb_after_convergence_m", "rmse_pcrb_ratio",
+    "recoveries", "first_reinit_s", "mean_recovery_s", "left_map", "fixes_accepted", "fixes_rejected",
 )
 
 # the per-update series stored for every run (float32): the scored ones every method has
@@ -39,7 +40,8 @@ SERIES_COLUMNS = (
 # (``cell_id`` is not among them: it is the Hive partition, in the directory name)
 ID_TYPES = {"sweep": pa.string(), "tables": pa.string(), "method": pa.string(),
             "run": pa.int64(), "seed": pa.int64(), "filter_seed": pa.int64()}
-METRIC_TYPES = {"diverged": pa.bool_(), "reinitialisations": pa.int64()}
+METRIC_TYPES = {"diverged": pa.bool_(), "reinitialisations": pa.int64(), "recoveries": pa.int64(),
+                "left_map": pa.bool_(), "fixes_accepted": pa.int64(), "fixes_rejected": pa.int64()}
 TAIL_TYPES = {"status": pa.string(), "error": pa.string(), "wall_s": pa.float64()}
 
 

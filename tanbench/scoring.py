@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tanbench.terrain import navigation_map
 from tanbench.vehicle.attitude import wrap_pi, yaw_to_heading_deg
 
 
@@ -20,6 +21,28 @@ class RunResult:
 
     metrics: dict
     series: dict
+
+
+def recovery_stats(t: np.ndarray, reinit: np.ndarray, healthy: np.ndarray, steps: int) -> tuple[int, float, float]:
+    """(recoveries, time of the first reinitialisation, mean time to recover) of one run.
+
+    A reinitialisation at update k has recovered at the first later update ending a run of
+    ``steps`` healthy updates (the method's ``healthy`` series: cloud converged and fitting
+    the terrain), before the next reinitialisation. Times are NaN when there is nothing
+    to time.
+    """
+    events = np.nonzero(reinit)[0]
+    first = float(t[events[0]] - t[0]) if events.size else float("nan")
+    times = []
+    for i, k0 in enumerate(events):
+        end = events[i + 1] if i + 1 < events.size else t.size
+        run = 0
+        for k in range(k0 + 1, end):
+            run = run + 1 if healthy[k] else 0
+            if run >= steps:
+                times.append(float(t[k] - t[k0]))
+                break
+    return len(times), first, float(np.mean(times)) if times else float("nan")
 
 
 def score(scenario, vehicle, updates, out, wall: float, method: str | None = None) -> RunResult:
@@ -55,6 +78,10 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
         conv_time = rmse = float("nan")
     reinit = out.reinit if out.reinit is not None else np.zeros(t.size, dtype=bool)
     nan = np.full(t.size, np.nan)
+    healthy = out.extra.get("healthy", np.zeros(t.size))
+    recoveries, first_reinit, mean_recovery = recovery_stats(t, reinit, np.asarray(healthy) > 0.5,
+                                                             f.divergence_steps)
+    nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
     metrics = {
         "final_horizontal_error_m": float(err_h[-1]),
         "mean_horizontal_error_m": float(err_h.mean()),
@@ -66,6 +93,12 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
         "final_east_error_m": float(err_e[-1]),
         "final_north_error_m": float(err_n[-1]),
         "filter_wall_s": float(wall),
+        "recoveries": recoveries,
+        "first_reinit_s": first_reinit,
+        "mean_recovery_s": mean_recovery,
+        "left_map": bool((~nmap.contains(out.east, out.north)).any()),
+        "fixes_accepted": int(np.sum(out.extra.get("fix_accepted", 0))),
+        "fixes_rejected": int(np.sum(out.extra.get("fix_rejected", 0))),
     }
     var_e = out.var_e if out.var_e is not None else nan
     var_n = out.var_n if out.var_n is not None else nan

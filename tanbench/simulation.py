@@ -23,6 +23,7 @@ from tanbench.config import Scenario
 from tanbench.errors import TanbenchError
 from tanbench.navigation.ins import run_strapdown
 from tanbench.sensors.dvl import measure_velocity
+from tanbench.sensors.faults import add_current, add_outliers, dropout_mask, tide_offset
 from tanbench.sensors.imu import ImuErrors, measure_imu
 from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
@@ -31,6 +32,8 @@ from tanbench.vehicle.trajectory import MotionPlan, Truth, paper_plan, simulate_
 
 # named random streams of a run (spawn-key suffixes)
 STREAM_INITIAL, STREAM_IMU, STREAM_DVL_VELOCITY, STREAM_DVL_RANGES, STREAM_SBE_RANGES, STREAM_PRESSURE = range(6)
+# world faults (sensors/faults.py): new streams, so faults off leave every number above unchanged
+STREAM_TIDE, STREAM_DROPOUT, STREAM_DVL_OUTLIERS, STREAM_SBE_OUTLIERS = range(6, 10)
 MIN_ALTITUDE_M = 1.0
 
 
@@ -118,13 +121,25 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
     def stream(k):
         return np.random.default_rng(np.random.SeedSequence(seed.entropy, spawn_key=tuple(seed.spawn_key) + (k,)))
 
+    fl = scenario.faults
     gyro, accel, imu_errors = measure_imu(truth.omega_ib, truth.f_body, truth.dt, s, stream(STREAM_IMU))
+    lost = dropout_mask(ping_idx.size, fl.dropout_rate_per_ping, fl.dropout_mean_pings, stream(STREAM_DROPOUT))
     dvl_velocity, scale = measure_velocity(truth.vel_body, ping_idx, s.dvl_scale_error, s.dvl_noise_mps,
-                                           stream(STREAM_DVL_VELOCITY))
+                                           stream(STREAM_DVL_VELOCITY), lost if lost.any() else None)
     depth = measure_depth(truth.pos[:, 2], s.pressure_error_percent, s.pressure_full_scale_m,
                           stream(STREAM_PRESSURE))
-    dvl_ranges = measure_ranges(dvl_true, scenario.noise_m, stream(STREAM_DVL_RANGES))
-    sbe_ranges = measure_ranges(sbe_true, scenario.noise_m, stream(STREAM_SBE_RANGES))
+    if fl.tide_bias_m or fl.tide_amplitude_m:
+        phase = stream(STREAM_TIDE).uniform(0.0, 2.0 * math.pi)
+        depth = depth + tide_offset(truth.t, fl.tide_bias_m, fl.tide_amplitude_m, fl.tide_period_s, phase)
+    speed_scale = 1.0 + fl.sound_speed_scale_error
+    dvl_ranges = measure_ranges(dvl_true * speed_scale if fl.sound_speed_scale_error else dvl_true,
+                                scenario.noise_m, stream(STREAM_DVL_RANGES))
+    sbe_ranges = measure_ranges(sbe_true * speed_scale if fl.sound_speed_scale_error else sbe_true,
+                                scenario.noise_m, stream(STREAM_SBE_RANGES))
+    dvl_ranges = add_outliers(dvl_ranges, fl.outlier_fraction, s.max_range_m, stream(STREAM_DVL_OUTLIERS))
+    sbe_ranges = add_outliers(sbe_ranges, fl.outlier_fraction, s.max_range_m, stream(STREAM_SBE_OUTLIERS))
+    if lost.any():
+        dvl_ranges = np.where(lost[:, None], np.nan, dvl_ranges)
 
     nav_cfg = scenario.navigation
     init = stream(STREAM_INITIAL)
@@ -145,14 +160,35 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
                        initial_position_error=pos_err, initial_heading_error_deg=nav_cfg.initial_heading_error_deg)
 
 
+# worlds handed to this process ready-made (a sweep's workers get the parent's)
+_PRELOADED_WORLDS: dict[str, tuple] = {}
+PRELOAD_WORLDS_MAX = 4  # a sweep with more worlds lets each worker compute its own
+
+
+def preload_worlds(worlds: dict[str, tuple]) -> None:
+    """Use these :func:`noise_free_world` results (computed by another process, keyed by
+    the world JSON) instead of recomputing them; they are made read-only as computed ones."""
+    for key, (truth, ping_idx, dvl, sbe) in worlds.items():
+        for arr in (truth.pos, truth.pitch, truth.yaw, dvl, sbe, ping_idx):
+            arr.setflags(write=False)
+        _PRELOADED_WORLDS[key] = (truth, ping_idx, dvl, sbe)
+
+
 @lru_cache(maxsize=4)
 def noise_free_world(world_json: str):
-    """Truth at the IMU rate, ping indices and noise-free DVL/SBE ranges (cached per world)."""
+    """Truth at the IMU rate, ping indices and noise-free DVL/SBE ranges (cached per world;
+    a world given by :func:`preload_worlds` is used as it is)."""
+    given = _PRELOADED_WORLDS.get(world_json)
+    if given is not None:
+        return given
     world = json.loads(world_json)
     scenario = Scenario(**world)
     s = scenario.sensors
     plan = motion_plan(scenario)
     truth = simulate_truth(plan, s.imu_rate_hz, s.latitude_deg)
+    fl = scenario.faults
+    if fl.current_east_mps or fl.current_north_mps:
+        add_current(truth, (fl.current_east_mps, fl.current_north_mps))
     tmap = truth_map(scenario.terrain)
     check_track_on_map(truth, tmap)
     ping_step = int(round(s.imu_rate_hz / s.sonar_rate_hz))
@@ -164,7 +200,7 @@ def noise_free_world(world_json: str):
                       s.dvl_beamwidth_deg if bw else 0.0, s.max_range_m)
     sbe = true_ranges(tmap, *args, altimeter_beam_vectors(), s.altimeter_beamwidth_deg if bw else 0.0,
                       s.max_range_m)
-    for arr in (truth.pos, truth.pitch, truth.yaw, dvl, sbe, ping_idx):
+    for arr in (truth.pos, truth.pitch, truth.yaw, truth.vel_body, dvl, sbe, ping_idx):
         arr.setflags(write=False)
     return truth, ping_idx, dvl, sbe
 

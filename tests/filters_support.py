@@ -26,13 +26,20 @@ COMMON_SERIES = {
     "horizontal_error_m", "heading_error_deg", "nav_horizontal_error_m", "ess", "reinit",
     "var_e", "var_n", "cov_en", "nees", "pcrb_horizontal_m", "pcrb_heading_deg",
 }
-TIGHT_SERIES = COMMON_SERIES | {"var_u", "var_heading", "var_pitch", "var_roll", "var_yaw", "var_bias_x", "var_bias_z",
-                                "bias_x_deg_h", "bias_z_deg_h"}
-LOOSE_SERIES = COMMON_SERIES | {"position_fix"}
 
 
 def series_keys(method: str) -> set:
-    return TIGHT_SERIES if method.startswith("tight") else LOOSE_SERIES
+    """The series a method's scored run has: the common ones, var_u / var_heading for methods that
+    estimate up / heading, and the record's own series."""
+    from tanbench.methods.registry import get
+
+    record = get(method)
+    keys = COMMON_SERIES | set(record.series)
+    if "up" in record.states:
+        keys |= {"var_u"}
+    if "heading" in record.states:
+        keys |= {"var_heading"}
+    return keys
 
 
 def short_scenario(duration_s: float = 120.0, particles: int = 400, **overrides) -> Scenario:

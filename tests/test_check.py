@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from tanbench.check import CheckOptions, compare, holm
 from tanbench.cli import app, main
-from tanbench.runner import store
+from tanbench import store
 
 BASELINE = Path(__file__).resolve().parents[1] / "results" / "ci-baseline"
 

@@ -15,7 +15,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from tanbench.check import CheckOptions, compare
-from tanbench.runner import store
+from tanbench import store
 
 SWEEP = """
 name: overconfidence

@@ -21,7 +21,7 @@ import pytest
 from filters_support import assert_same_tree, series_keys, short_scenario, snapshot
 from tanbench.options import REGULARISATION, RESAMPLING
 from tanbench.errors import TanbenchError
-from tanbench.methods.registry import builtin_names
+from tanbench.methods.registry import builtin_names, get, particle_steps
 from tanbench.filters import resample as rs
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.methods import run_method
@@ -32,6 +32,9 @@ from tanbench.simulation import simulate_vehicle
 from tanbench.terrain.grid import Map
 
 METHODS = builtin_names()
+# the randomised methods, whose budget is the particle count (grid, Kalman and batch methods are
+# deterministic: their seed cannot matter and they have no cloud to shrink)
+PARTICLE_METHODS = tuple(m for m in METHODS if get(m).cost_units is particle_steps)
 
 SEED = 90210
 PERFECT_SENSORS = dict(gyro_turn_on_bias_deg_h=0.0, gyro_bias_instability_deg_h=0.0, gyro_arw_deg_sqrt_h=0.0,
@@ -102,6 +105,8 @@ MAY_BE_NAN = {m: {"nees", "pcrb_horizontal_m", "pcrb_heading_deg"} for m in METH
 def check_finite(result, method):
     for k, a in result.series.items():
         a = np.asarray(a)
+        if k in ("ess", "cov_en") and np.isnan(a).all():
+            continue  # optional outputs a method does not report (no particles, no cross-covariance)
         if a.dtype.kind == "f" and k not in MAY_BE_NAN.get(method, set()):
             assert np.isfinite(a).all(), f"{method}: series {k} has NaN/inf"
     for k in ("final_horizontal_error_m", "mean_horizontal_error_m", "final_heading_error_deg"):
@@ -135,7 +140,8 @@ def test_series_keys_and_lengths(base, base_results, method):
     # the error series are what they say
     np.testing.assert_allclose(s["east_error_m"], s["est_e"] - s["truth_e"], atol=1e-9)
     np.testing.assert_allclose(s["horizontal_error_m"], np.hypot(s["east_error_m"], s["north_error_m"]), atol=1e-9)
-    assert ((s["ess"] >= 1 - 1e-9) & (s["ess"] <= sc.particles + 1e-6)).all()
+    if np.isfinite(s["ess"]).any():
+        assert ((s["ess"] >= 1 - 1e-9) & (s["ess"] <= sc.particles + 1e-6)).all()
     assert (s["var_e"] >= 0).all() and (s["var_n"] >= 0).all()
     assert ((s["est_heading_deg"] >= 0) & (s["est_heading_deg"] < 360)).all()
 
@@ -172,7 +178,7 @@ def test_reproducible(base, base_results, method):
         np.testing.assert_array_equal(first.series[k], third.series[k], err_msg=k)
 
 
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", PARTICLE_METHODS)
 def test_filter_seed_matters(base, base_results, method):
     sc, v = base
     other = run_method(sc, method, v, fseed(1, method))
@@ -255,11 +261,23 @@ def test_start_at_truth_stays(method):
         assert r.metrics["convergence_time_s"] == 0.0
 
 
-@pytest.mark.parametrize("method", METHODS)
-def test_zero_range_noise_no_worse(method):
+# the paper's plain reading of the likelihood and loose TAN (docs/realism.md); the recommended
+# settings are the defaults
+PAPER_READING = dict(map_aware_likelihood=False, likelihood="gaussian", loose_architecture="fix-only",
+                     keep_on_map=False, divergence_spread_m=None)
+NOISE_FREE_WORSE = ("issue 12: with the recommended map-aware Student-t likelihood, noise-free ranges end "
+                    "worse than 1 m noise in these 120 s, 400-particle runs; not investigated yet")
+
+
+@pytest.mark.parametrize("settings, method", [("paper", m) for m in METHODS] + [
+    ("recommended", m) if m == "tight-dvl" else
+    pytest.param("recommended", m, marks=pytest.mark.xfail(strict=True, reason=NOISE_FREE_WORSE))
+    for m in METHODS])
+def test_zero_range_noise_no_worse(settings, method):
     """noise_m = 0 runs (no zero-variance trouble) and is not worse than 1 m noise on the same
     vehicle runs (common random numbers: noise_m is not part of the world)."""
-    noisy, clean = short_scenario(noise_m=1.0), short_scenario(noise_m=0.0)
+    f = PAPER_READING if settings == "paper" else {}
+    noisy, clean = short_scenario(noise_m=1.0, filter=f), short_scenario(noise_m=0.0, filter=f)
     assert noisy.world_key() == clean.world_key()
     errs = {0.0: [], 1.0: []}
     for k in range(6):
@@ -293,13 +311,39 @@ def test_flat_seafloor_leaves_position_unobservable(plane_world, method):
         assert std.min() > initial / 4, std.min()
         assert std[-1] > initial / 4
         assert r.metrics["reinitialisations"] == 0
-        if method.startswith("tight"):
+        if "up" in get(method).states:
             # depth is observable (and sensed): the vertical estimate stays on the truth
             assert np.abs(s["est_u"] - s["truth_u"]).max() < 2.0
-        else:
+        if "position_fix" in s:
             assert not s["position_fix"].any()
             np.testing.assert_array_equal(s["est_e"], s["nav_e"])
             np.testing.assert_array_equal(s["est_n"], s["nav_n"])
+
+
+@pytest.mark.parametrize("method", [pytest.param(m, marks=pytest.mark.xfail(
+    strict=True, reason="loose-dvl reports its particle cloud's variance, not that of its output (the "
+                        "navigation solution until a fix): 222 m of error under a 64 m sigma on a plane"))
+    if m == "loose-dvl" else m for m in METHODS])
+def test_flat_seafloor_error_follows_navigation_and_no_fix_is_claimed(plane_world, method):
+    """Where TAN has no information (a plane), every method's error follows the navigation system's
+    and its reported covariance admits it: at every update the estimate lies within 3 reported
+    sigmas (sqrt(var_e + var_n)) of the truth and of the navigation solution, and over two runs the
+    mean final error is at least half the navigation system's (no method beats dead reckoning
+    without information). Thresholds fixed before the runs were looked at."""
+    sc = short_scenario(duration_s=300.0, particles=500)
+    final, nav_final = [], []
+    for k in range(2):
+        r = run_method(sc, method, simulate_vehicle(sc, vseed(k)), fseed(k, method))
+        check_finite(r, method)
+        s = r.series
+        sigma = np.sqrt(s["var_e"] + s["var_n"])
+        assert (s["horizontal_error_m"] <= 3.0 * sigma).all(), \
+            f"{method}: error {s['horizontal_error_m'].max():.1f} m beyond 3 sigma (min sigma {sigma.min():.1f} m)"
+        off_nav = np.hypot(s["est_e"] - s["nav_e"], s["est_n"] - s["nav_n"])
+        assert (off_nav <= 3.0 * sigma).all(), f"{method}: {off_nav.max():.1f} m off the navigation solution"
+        final.append(s["horizontal_error_m"][-1])
+        nav_final.append(s["nav_horizontal_error_m"][-1])
+    assert np.mean(final) >= 0.5 * np.mean(nav_final), (final, nav_final)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -322,7 +366,7 @@ def test_no_bottom_lock_is_not_divergence(method):
     assert not blind, f"reinitialised after {steps} updates without any range at updates {blind}"
 
 
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", PARTICLE_METHODS)
 @pytest.mark.parametrize("particles", [1, 2, 3])
 def test_tiny_clouds(method, particles):
     """One to three particles: degenerate but must run without NaN (ESS 1, resampling one particle)."""

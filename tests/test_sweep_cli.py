@@ -22,7 +22,7 @@ from sweep_support import (
     METHODS, RUN_COLUMNS, TABLE_COLUMNS, assert_same_runs, cli, load_tables, sweep_dict, write_sweep,
 )
 from tanbench import results
-from tanbench.runner import store
+from tanbench import store
 from tanbench.runner.sweep import load_sweep, parse_sweep
 
 N_CELLS = 3  # map_resolution {10, 20} x particles {60, 80}, the (10, 60) cell shared

@@ -24,6 +24,7 @@ import numpy as np
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import sin_cos_about
+from tanbench.options import LIKELIHOOD
 from tanbench.terrain.grid import bilinear, bilinear_numpy
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -139,3 +140,167 @@ def loglik_loose_numpy(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside
     chi = sq / sig_u**2
     best = (chi / ok.sum()).min() if ok.any() else np.inf
     return -0.5 * chi, best
+
+
+# --------------------------------------------------------------------------------------
+# Map-aware, robust likelihoods (docs/model.md, Section 6.3)
+#
+# Each beam's variance is the sonar's plus the navigation map's variance at the beam's
+# footprint (``terrain/representation.py``: slope x resolution plus the declared map
+# error), interpolated like the map. Because that variance depends on where a particle
+# puts the footprint, its log-normaliser stays in the log-likelihood:
+#
+#   Gaussian:  log p = -1/2 [ d^2 / v + log(v / sigma_U^2) ]
+#   Student-t: log p = -(nu + 1)/2 log(1 + d^2 / (nu v)) - 1/2 log(v / sigma_U^2)
+#
+# (constants dropped; with a zero variance grid the Gaussian reduces to the plain kernels
+# above). The Student-t's heavy tails bound the pull of one wild range (outliers,
+# multipath, fish). A footprint off the map is charged ``outside_sigma`` of its sigma.
+# The divergence statistic is the mean d^2 / v per beam of the best particle.
+# --------------------------------------------------------------------------------------
+LIK_GAUSSIAN, LIK_STUDENT = LIKELIHOOD["gaussian"], LIKELIHOOD["student-t"]
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
+def _beam_logpdf(d2, v, inv_u2, kind, nu):
+    """Log-density of one beam's squared innovation ``d2`` with variance ``v``."""
+    norm = -0.5 * math.log(v * inv_u2)
+    if kind == LIK_STUDENT:
+        return -0.5 * (nu + 1.0) * math.log(1.0 + d2 / (nu * v)) + norm
+    return -0.5 * d2 / v + norm
+
+
+def _beam_logpdf_numpy(d2, v, sig_u, kind, nu):
+    norm = -0.5 * np.log(v / sig_u**2)
+    if kind == LIK_STUDENT:
+        return -0.5 * (nu + 1.0) * np.log1p(d2 / (nu * v)) + norm
+    return -0.5 * d2 / v + norm
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def loglik_tight_mapaware(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
+                          dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out):
+    """:func:`loglik_tight` with per-beam variance ``sig_u^2 + mvar`` at the footprint and a
+    Gaussian or Student-t beam density; returns the best mean d^2 / v per beam."""
+    m = beams.shape[0]
+    used = 0
+    for i in range(m):
+        if ranges[i] == ranges[i]:
+            used += 1
+    su2 = sig_u * sig_u
+    inv_u2 = 1.0 / su2
+    inv_d2 = 1.0 / (sig_d * sig_d)
+    out2 = outside_sigma * outside_sigma
+    best = np.inf
+    s_pitch, c_pitch = math.sin(ref_pitch), math.cos(ref_pitch)
+    s_roll, c_roll = math.sin(ref_roll), math.cos(ref_roll)
+    s_yaw, c_yaw = math.sin(ref_yaw), math.cos(ref_yaw)
+    for j in range(x.shape[0]):
+        st, ct = sin_cos_about(s_pitch, c_pitch, x[j, PITCH] - ref_pitch)
+        sg, cg = sin_cos_about(s_roll, c_roll, x[j, ROLL] - ref_roll)
+        sp, cp = sin_cos_about(s_yaw, c_yaw, x[j, YAW] - ref_yaw)
+        c00 = cg * cp - st * sg * sp
+        c01 = -ct * sp
+        c02 = sg * cp + st * cg * sp
+        c10 = cg * sp + st * sg * cp
+        c11 = ct * cp
+        c12 = sg * sp - st * cg * cp
+        c20 = -ct * sg
+        c21 = st
+        c22 = ct * cg
+        ll = 0.0
+        chi = 0.0
+        for i in range(m):
+            r = ranges[i]
+            if r != r:
+                continue
+            a0 = beams[i, 0] * r
+            a1 = beams[i, 1] * r
+            a2 = beams[i, 2] * r
+            pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
+            pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
+            pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
+            h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
+            mv = bilinear(mvar, e0, n0, inv_re, inv_rn, pe, pn)
+            if h == h and mv == mv:
+                v = su2 + mv
+                d2 = (pu - h) * (pu - h)
+                ll += _beam_logpdf(d2, v, inv_u2, kind, nu)
+                chi += d2 / v
+            else:
+                ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
+                chi += out2
+        if used > 0 and chi / used < best:
+            best = chi / used
+        out[j] = ll - 0.5 * (dist_innov[j, 0] ** 2 + dist_innov[j, 1] ** 2) * inv_d2
+    return best
+
+
+def loglik_tight_mapaware_numpy(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
+                                dist_innov, sig_d, kind, nu):
+    """Plain-numpy reference of :func:`loglik_tight_mapaware`: (loglik (M,), best)."""
+    c = dcm_body_to_nav_numpy(x[:, PITCH], x[:, ROLL], x[:, YAW])
+    ok = ~np.isnan(ranges)
+    vec = beams[ok] * ranges[ok][:, None]
+    p = x[:, None, [E, N, U]] + np.einsum("mij,bj->mbi", c, vec)
+    return _mapaware_terms(p[..., 0], p[..., 1], p[..., 2], z, mvar, e0, n0, inv_re, inv_rn, sig_u,
+                           outside_sigma, kind, nu, ok.sum(), (dist_innov**2).sum(axis=1) / sig_d**2)
+
+
+def _mapaware_terms(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, used, dist_chi):
+    h = bilinear_numpy(z, e0, n0, inv_re, inv_rn, pe, pn)
+    mv = bilinear_numpy(mvar, e0, n0, inv_re, inv_rn, pe, pn)
+    off = np.isnan(h) | np.isnan(mv)
+    v = np.where(off, sig_u**2, sig_u**2 + np.nan_to_num(mv))
+    d2 = np.where(off, outside_sigma**2 * sig_u**2, (pu - np.nan_to_num(h)) ** 2)
+    ll = _beam_logpdf_numpy(d2, v, sig_u, kind, nu).sum(axis=1)
+    chi = (d2 / v).sum(axis=1)
+    best = (chi / used).min() if used else np.inf
+    return ll - 0.5 * dist_chi, best
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def loglik_loose_mapaware(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, out):
+    """:func:`loglik_loose` with the map-aware variance and a Gaussian or Student-t beam density."""
+    m = offsets.shape[0]
+    used = 0
+    for i in range(m):
+        if offsets[i, 2] == offsets[i, 2]:
+            used += 1
+    su2 = sig_u * sig_u
+    inv_u2 = 1.0 / su2
+    out2 = outside_sigma * outside_sigma
+    best = np.inf
+    for j in range(x.shape[0]):
+        ll = 0.0
+        chi = 0.0
+        for i in range(m):
+            if offsets[i, 2] != offsets[i, 2]:
+                continue
+            pe = x[j, 0] + offsets[i, 0]
+            pn = x[j, 1] + offsets[i, 1]
+            h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
+            mv = bilinear(mvar, e0, n0, inv_re, inv_rn, pe, pn)
+            if h == h and mv == mv:
+                v = su2 + mv
+                d = up + offsets[i, 2] - h
+                ll += _beam_logpdf(d * d, v, inv_u2, kind, nu)
+                chi += d * d / v
+            else:
+                ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
+                chi += out2
+        if used > 0 and chi / used < best:
+            best = chi / used
+        out[j] = ll
+    return best
+
+
+def loglik_loose_mapaware_numpy(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu):
+    """Plain-numpy reference of :func:`loglik_loose_mapaware`: (loglik (M,), best)."""
+    ok = ~np.isnan(offsets[:, 2])
+    o = offsets[ok]
+    pe = x[:, 0:1] + o[:, 0]
+    pn = x[:, 1:2] + o[:, 1]
+    pu = np.broadcast_to(up + o[:, 2], pe.shape)
+    return _mapaware_terms(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu,
+                           ok.sum(), np.zeros(x.shape[0]))

@@ -1,18 +1,20 @@
-"""Loosely coupled TAN (Melo & Matos Section 5, after Hagen et al. 2011): the baseline.
+"""Loosely coupled TAN (Melo & Matos Section 5, after Hagen et al. 2011): two loops.
 
-The terrain measurements are processed in a separate particle filter over horizontal
-position only, driven by the navigation system's position increments; its beams are
-projected with the navigation system's attitude (it has no attitude or bias states).
-Its process noise is Table 2's plus, by default, the cross-track error the navigation
-system's heading uncertainty (the same prior the tight filter starts from, 30 deg)
-causes on each increment: without it a position-only filter cannot follow a track
-dead-reckoned with a wrong heading, and its fixes make the navigation worse than none.
-While the filter has converged (horizontal std below ``converged_std`` and its best
-particle fitting the terrain within half the divergence threshold, for ``div_steps``
-updates in a row), its estimate is fed back to the navigation system as a position fix; the method's output is the
-navigation system corrected by the latest fix. The navigation system keeps its own
-heading, so a heading error is never corrected, only the position it has caused.
-Divergence, resampling and regularisation are handled as in the tight filter.
+* :func:`loose_kalman_loop` (``filter.loose_architecture: kalman-feedback``, recommended):
+  a position-only particle filter whose terrain-only fixes go to an error-state Kalman
+  filter of the navigation system (``navigation/eskf.py``: position, heading, z-gyro
+  bias); the corrected navigation drives the PF (closed loop). docs/model.md, Section 6.2.
+* :func:`loose_filter_loop` (``fix-only``, the earlier baseline): the PF is driven by the
+  navigation system's position increments with Table 2's process noise plus the
+  cross-track error the 30 deg heading prior causes on each increment; while it has
+  converged (horizontal std below ``converged_std`` and its best particle fitting the
+  terrain within half the divergence threshold, for ``div_steps`` updates in a row), its
+  estimate is fed back to the navigation system as a position fix; the output is the
+  navigation system corrected by the latest fix. Its heading is never corrected.
+
+Beams are projected with the navigation system's attitude (turned by the corrected
+heading in the closed loop). Divergence, resampling and regularisation as in the tight
+filter.
 """
 
 from __future__ import annotations
@@ -24,9 +26,13 @@ import numpy as np
 
 from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import loglik_loose
-from tanbench.filters.propagate import propagate_loose
+from tanbench.filters.likelihood import loglik_loose, loglik_loose_mapaware
+from tanbench.filters.propagate import DIST_NONE, propagate_loose, propagate_tight
 from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
+from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
+from tanbench.filters.tight import keep_on_map
+from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
+from tanbench.navigation.increments import JAZE, JAZN, SZ
 
 LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states the regularisation jitters
 
@@ -108,6 +114,215 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
                 gaussian_horizontal(x, rng, centre_e, centre_n, readings.cloud_std)
             logw[:] = 0.0
             bad = 0
+            reinit_out[k] = 1
+            continue
+        resample_and_regularise(x, w, logw, ess, rng, rs, 2, math.sqrt(v[0] + v[1]), uni, idx, scratch)
+
+
+@nb.njit(cache=True)
+def position_reset(p_kf, r):
+    """The first fix after a (re)initialisation sets the position: P_pp = R, the position's
+    correlations with heading and bias dropped (a single fix cannot tell an initial
+    position error from a heading error; heading is learnt from the fixes that follow)."""
+    for i in range(N_ERROR):
+        p_kf[EE, i] = p_kf[i, EE] = 0.0
+        p_kf[EN, i] = p_kf[i, EN] = 0.0
+    p_kf[EE, EE] = r[0, 0]
+    p_kf[EE, EN] = r[0, 1]
+    p_kf[EN, EE] = r[1, 0]
+    p_kf[EN, EN] = r[1, 1]
+
+
+@nb.njit(cache=True)
+def reopen_kf(p_kf, p0_pos, p0_yaw):
+    """Recovery of a locked-out navigation KF (``kf.misses`` fixes rejected in a row: the
+    healthy terrain PF and the KF disagree persistently, so the KF is the overconfident
+    one): position variances back to the initial ones, heading variance to at least a
+    quarter of the initial (half its std), their correlations dropped; the bias keeps its own."""
+    for i in range(N_ERROR):
+        if i != EB:
+            for j in range(N_ERROR):
+                p_kf[i, j] = 0.0
+                p_kf[j, i] = 0.0
+    p_kf[EE, EE] = p0_pos
+    p_kf[EN, EN] = p0_pos
+    p_kf[EPSI, EPSI] = 0.25 * p0_yaw
+
+
+@nb.njit(cache=True)
+def _open_window(m_prior, p_prior, centre_e, centre_n, half_side):
+    """The prior of a (re)initialised cloud: the uniform square's mean and covariance."""
+    m_prior[0] = centre_e
+    m_prior[1] = centre_n
+    p_prior[0, 0] = p_prior[1, 1] = half_side * half_side / 3.0
+    p_prior[0, 1] = p_prior[1, 0] = 0.0
+
+
+# --------------------------------------------------------------------------------------
+# Closed-loop loose TAN ("kalman-feedback", the recommended architecture)
+# --------------------------------------------------------------------------------------
+@nb.njit(cache=True)
+def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, div, half_side, lik, guard,
+                      kf, p_kf, out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out,
+                      rejected_out, healthy_out):
+    """Position PF -> fixes -> error-state KF of the navigation system -> corrected navigation,
+    which drives the PF (docs/model.md, Section 6.2).
+
+    The corrected navigation (position, yaw, z-gyro bias) is dead-reckoned from the
+    navigation increments ``inc`` like one zero-noise tight particle; the PF particles move
+    by its displacement with a cross-track noise from the KF's heading std; the beams
+    (``offsets``, projected with the navigation attitude) are turned by the corrected
+    heading. Every ``fix_every`` updates, if the PF has converged (as in
+    :func:`loose_filter_loop`), its mean and covariance (plus ``r_floor``^2) are a fix for
+    the KF (:func:`~tanbench.navigation.eskf.eskf_update`, chi-square gate ``gate``); an
+    accepted fix is injected into the corrected navigation. ``p_kf`` (4, 4) is the KF's
+    initial covariance, updated in place; ``out_en[0]`` holds the start position.
+
+    ``zmap``, ``model``, ``rs``, ``div``, ``lik``, ``guard`` and ``kf`` are the bundles of
+    :mod:`tanbench.filters.params` (MapArgs, LooseModel, Resampling, Divergence,
+    Likelihood, Guard, LooseKalman); ``model.sig_heading`` is not used (the KF's heading
+    std replaces it).
+    """
+    z, e0, n0, inv_re, inv_rn = zmap
+    sig_pos = model.sig_pos
+    converged_std = model.converged_std
+    m = x.shape[0]
+    steps = offsets.shape[0]
+    nb_beams = offsets.shape[1]
+    logw = np.zeros(m)
+    ll = np.empty(m)
+    w = np.empty(m)
+    noise = np.empty((m, 3))
+    uni = np.empty(m)
+    idx = np.empty(m, dtype=np.int64)
+    scratch = np.empty_like(x)
+    mean = np.empty(2)
+    v = np.empty(2)
+    cov = np.empty((2, 2))
+    r = np.empty((2, 2))
+    dx = np.empty(N_ERROR)
+    rot = np.empty((nb_beams, 3))
+    m_prior = np.empty(2)  # the PF's prior over the window since the last fix
+    p_prior = np.empty((2, 2))
+    zt = np.empty(2)
+    _open_window(m_prior, p_prior, out_en[0, 0], out_en[0, 1], half_side)
+    nav = np.zeros((1, N_TIGHT))
+    zero_noise = np.zeros((1, 6))
+    dist = np.zeros((1, 2))
+    nav[0, E] = out_en[0, 0]
+    nav[0, N] = out_en[0, 1]
+    nav[0, YAW] = nav_yaw[0]
+    bad = 0
+    good = 0
+    since_fix = 0
+    rejections = 0  # fixes rejected by the gate in a row
+    first_fix = True  # the next fix resets the position (after the start or a PF reinitialisation)
+    p0_pos = p_kf[EE, EE]
+    p0_yaw = p_kf[EPSI, EPSI]
+    locked = False  # the cloud has converged since the last (re)initialisation
+    consistent_chi = (0.5 * div.sigma) ** 2
+    for k in range(steps):
+        if k > 0:
+            e_before = nav[0, E]
+            n_before = nav[0, N]
+            s, c = math.sin(nav[0, YAW] - nav_yaw[k - 1]), math.cos(nav[0, YAW] - nav_yaw[k - 1])
+            b_e = -(c * inc[k - 1, JAZE] - s * inc[k - 1, JAZN])
+            b_n = -(s * inc[k - 1, JAZE] + c * inc[k - 1, JAZN])
+            nav[0, U] = nav_up[k - 1]
+            propagate_tight(nav, inc[k - 1], nav_yaw[k - 1], zero_noise, 0.0, 0.0, 0.0, DIST_NONE, dist)
+            d_e = nav[0, E] - e_before
+            d_n = nav[0, N] - n_before
+            sig_heading = math.sqrt(p_kf[EPSI, EPSI])
+            eskf_predict(p_kf, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
+            for j in range(m):
+                noise[j, 0] = rng.standard_normal()
+                noise[j, 1] = rng.standard_normal()
+                noise[j, 2] = rng.standard_normal()
+            propagate_loose(x, d_e, d_n, noise, sig_pos, sig_heading)
+            # the window's prior: the same motion and process noise as the particles
+            m_prior[0] += d_e
+            m_prior[1] += d_n
+            sh2 = sig_heading * sig_heading
+            p_prior[0, 0] += sig_pos * sig_pos + sh2 * d_n * d_n
+            p_prior[1, 1] += sig_pos * sig_pos + sh2 * d_e * d_e
+            p_prior[0, 1] -= sh2 * d_e * d_n
+            p_prior[1, 0] -= sh2 * d_e * d_n
+        # beams turned by the corrected heading's offset from the navigation heading
+        s, c = math.sin(nav[0, YAW] - nav_yaw[k]), math.cos(nav[0, YAW] - nav_yaw[k])
+        for i in range(nb_beams):
+            rot[i, 0] = c * offsets[k, i, 0] - s * offsets[k, i, 1]
+            rot[i, 1] = s * offsets[k, i, 0] + c * offsets[k, i, 1]
+            rot[i, 2] = offsets[k, i, 2]
+        if lik.mapaware:
+            best = loglik_loose_mapaware(x, rot, nav_up[k], z, lik.mvar, e0, n0, inv_re, inv_rn, model.sig_u,
+                                         model.outside_sigma, lik.kind, lik.nu, ll)
+        else:
+            best = loglik_loose(x, rot, nav_up[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma, ll)
+        for j in range(m):
+            logw[j] += ll[j]
+        normalize_log_weights(logw, w)
+        weighted_estimate(x, w, -1, 0.0, mean, v, cov)
+        ess = effective_sample_size(w)
+        spread = math.sqrt(v[0] + v[1])
+        healthy = spread < converged_std and best < consistent_chi
+        good = good + 1 if healthy else 0
+        locked = locked or healthy
+        since_fix += 1
+        fixed_out[k] = 0
+        rejected_out[k] = 0
+        if good >= div.steps and since_fix >= kf.fix_every:
+            since_fix = 0
+            if terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r):
+                r[0, 0] += kf.r_floor * kf.r_floor
+                r[1, 1] += kf.r_floor * kf.r_floor
+                if first_fix:  # position reset: one fix cannot tell an initial position error from heading
+                    position_reset(p_kf, r)
+                    nav[0, E] = zt[0]
+                    nav[0, N] = zt[1]
+                    first_fix = False
+                    fixed_out[k] = 1
+                else:
+                    chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
+                    if not chi2 < kf.gate:
+                        rejections += 1
+                        if rejections >= kf.misses:  # the KF is locked out: reopen it and take the fix
+                            reopen_kf(p_kf, p0_pos, p0_yaw)
+                            chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
+                    if chi2 < kf.gate:
+                        rejections = 0
+                        nav[0, E] += dx[EE]
+                        nav[0, N] += dx[EN]
+                        nav[0, YAW] += dx[EPSI]
+                        nav[0, BZ] += dx[EB]
+                        fixed_out[k] = 1
+                    else:
+                        rejected_out[k] = 1
+            m_prior[0] = mean[0]
+            m_prior[1] = mean[1]
+            for a in range(2):
+                for b in range(2):
+                    p_prior[a, b] = cov[a, b]
+        off_map = keep_on_map(nav[0, :2], guard.bounds)
+        out_en[k, 0] = nav[0, E]
+        out_en[k, 1] = nav[0, N]
+        out_yaw[k] = nav[0, YAW]
+        out_bias[k] = nav[0, BZ]
+        var[k, 0] = p_kf[EE, EE]
+        var[k, 1] = p_kf[EN, EN]
+        var_yaw[k] = p_kf[EPSI, EPSI]
+        ess_out[k] = ess
+        healthy_out[k] = 1 if healthy else 0
+        reinit_out[k] = 0
+        if best < np.inf:  # an update without any bottom lock says nothing about divergence
+            bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
+        if bad >= div.steps or off_map:
+            init_loose(x, rng, nav[0, E], nav[0, N], half_side)
+            logw[:] = 0.0
+            bad = 0
+            good = 0
+            locked = False
+            first_fix = True
+            _open_window(m_prior, p_prior, nav[0, E], nav[0, N], half_side)
             reinit_out[k] = 1
             continue
         resample_and_regularise(x, w, logw, ess, rng, rs, 2, spread, uni, idx, scratch)

@@ -35,3 +35,19 @@ LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma c
 # square), whether a diverged filter is reinitialised, and the horizontal std below which a resampled cloud is
 # redrawn with its initial spread (0 = never; the Resampling bundle's min_spread re-spreads instead)
 Readings = namedtuple("Readings", "propagation dt cloud_std div_reinit collapse_spread")
+
+# measurement model of the map-aware kernels (filters/likelihood.py): use them (``mapaware``),
+# beam density code (``kind``, options.LIKELIHOOD) and Student-t degrees of freedom ``nu``,
+# and the map's representation-variance grid ``mvar`` (terrain/representation.py)
+Likelihood = namedtuple("Likelihood", "mapaware kind nu mvar")
+
+# divergence guards: a horizontal cloud std above ``spread_limit`` m (once converged) counts
+# as a bad update; a cloud std below ``healthy_std`` with a good fit is "healthy" (recovery
+# statistics); the estimate is kept in ``bounds`` (e_min, e_max, n_min, n_max), off if e_min > e_max
+Guard = namedtuple("Guard", "spread_limit healthy_std bounds")
+
+# the closed-loop loose TAN's navigation KF (navigation/eskf.py): process noise std per
+# update (position, heading, z-gyro bias), a fix every ``fix_every`` updates, chi-square
+# gate, std added to a fix, the weakest terrain-only fix used, and the gate rejections in
+# a row after which the KF is reopened
+LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses")

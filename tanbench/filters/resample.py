@@ -28,6 +28,7 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters.rng import resampling_draws
 from tanbench.options import REGULARISATION, RESAMPLING
 
 SYSTEMATIC, MULTINOMIAL, STRATIFIED, RESIDUAL = (RESAMPLING[k] for k in ("systematic", "multinomial",
@@ -229,7 +230,7 @@ def resample_and_regularise(x, w, logw, ess, rng, rs, dim, spread, uni, idx, scr
         logw[j] -= mx
     if ess >= rs.ess_threshold * m:
         return
-    for j in range(m):
+    for j in range(resampling_draws(rng, rs.scheme == SYSTEMATIC, m)):
         uni[j] = rng.random()
     resample_indices(rs.scheme, w, uni, idx)
     apply_resample(x, idx, scratch)

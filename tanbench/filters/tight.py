@@ -37,7 +37,7 @@ import numpy as np
 
 from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import loglik_tight
+from tanbench.filters.likelihood import loglik_tight, loglik_tight_mapaware
 from tanbench.filters.propagate import propagate_tight, propagate_tight_euler
 from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
@@ -68,14 +68,22 @@ def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
 
 @nb.njit(cache=True)
 def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, zmap, model, rs, div,
-                      prior, readings, euler_in, est, var, cov_en_out, ess_out, reinit_out):
-    """Run the filter over all updates; fill est/var (K+1, 8), cov_en_out, ess_out and reinit_out (K+1,).
+                      prior, readings, euler_in, lik, guard, est, var, cov_en_out, ess_out, reinit_out,
+                      healthy_out):
+    """Run the filter over all updates; fill est/var (K+1, 8), cov_en_out, ess_out, reinit_out and
+    healthy_out (K+1,).
 
     ``cov_en_out`` is the cloud's weighted east/north covariance (``var`` holds the variances).
 
-    ``zmap``, ``model``, ``rs``, ``div``, ``prior`` and ``readings`` are the bundles of
-    :mod:`tanbench.filters.params` (MapArgs, TightModel, Resampling, Divergence, TightPrior,
-    Readings); ``euler_in`` (K, 4) the Euler-step inputs (used if ``readings.propagation``).
+    ``zmap``, ``model``, ``rs``, ``div``, ``prior``, ``readings``, ``lik`` and ``guard`` are the
+    bundles of :mod:`tanbench.filters.params` (MapArgs, TightModel, Resampling, Divergence,
+    TightPrior, Readings, Likelihood, Guard); ``euler_in`` (K, 4) the Euler-step inputs (used if
+    ``readings.propagation``). ``lik.mapaware`` selects :func:`loglik_tight_mapaware` instead of
+    :func:`loglik_tight`; a horizontal cloud std above ``guard.spread_limit``, once the
+    cloud has converged since its last (re)initialisation, counts as a bad update like a
+    poor fit; an estimate off ``guard.bounds`` is clamped into them and the cloud
+    reinitialised there (:func:`keep_on_map`). ``healthy_out[k]`` is 1 when the cloud std
+    is below ``guard.healthy_std`` and the best fit within half the divergence threshold.
     """
     z, e0, n0, inv_re, inv_rn = zmap
     m = x.shape[0]
@@ -92,6 +100,7 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
     v = np.empty(N_TIGHT)
     cov = np.empty((2, 2))
     bad = 0
+    locked = False  # the cloud has converged since the last (re)initialisation
     for k in range(steps):
         if k > 0:
             for j in range(m):
@@ -103,29 +112,68 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
             else:
                 propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up, model.sig_att,
                                 model.dist_mode, dist)
-        best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma,
-                            dist, model.sig_d, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
+        if lik.mapaware:
+            best = loglik_tight_mapaware(x, beams, ranges[k], z, lik.mvar, e0, n0, inv_re, inv_rn, model.sig_u,
+                                         model.outside_sigma, dist, model.sig_d, nav_pitch[k], nav_roll[k],
+                                         nav_yaw[k], lik.kind, lik.nu, ll)
+        else:
+            best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma,
+                                dist, model.sig_d, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
         for j in range(m):
             logw[j] += ll[j]
         normalize_log_weights(logw, w)
         weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)
         ess = effective_sample_size(w)
+        spread = math.sqrt(v[E] + v[N])
+        off_map = keep_on_map(mean, guard.bounds)
         est[k, :] = mean
         var[k, :] = v
         cov_en_out[k] = cov[0, 1]
         ess_out[k] = ess
         reinit_out[k] = 0
+        healthy_out[k] = 1 if (spread < guard.healthy_std and best < 0.25 * div.sigma * div.sigma) else 0
+        locked = locked or healthy_out[k] == 1
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
-            bad = bad + 1 if best > div.sigma * div.sigma else 0
-        spread = math.sqrt(v[E] + v[N])
+            bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
         diverged = readings.div_reinit and bad >= div.steps
         collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
-        if diverged or collapsed:
+        if diverged or collapsed or off_map:
             init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior)
             if readings.cloud_std > 0.0:
                 gaussian_horizontal(x, rng, mean[E], mean[N], readings.cloud_std)
             logw[:] = 0.0
             bad = 0
+            locked = False
             reinit_out[k] = 1
             continue
         resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)
+
+
+@nb.njit(cache=True)
+def keep_on_map(mean, bounds):
+    """Clamp the horizontal estimate ``mean[0:2]`` into ``bounds`` (e_min, e_max, n_min, n_max).
+
+    Returns True if it had left them (the caller then reinitialises the cloud around the
+    clamped estimate). Bounds with e_min > e_max disable the check.
+    """
+    if bounds[0] > bounds[1]:
+        return False
+    out = False
+    if mean[0] < bounds[0] or mean[0] > bounds[1]:
+        mean[0] = min(max(mean[0], bounds[0]), bounds[1])
+        out = True
+    if mean[1] < bounds[2] or mean[1] > bounds[3]:
+        mean[1] = min(max(mean[1], bounds[2]), bounds[3])
+        out = True
+    return out
+
+
+def keep_on_map_numpy(mean, bounds):
+    """Plain-numpy reference of :func:`keep_on_map`: (clamped copy, left the bounds)."""
+    mean = np.array(mean, dtype=float)
+    if bounds[0] > bounds[1]:
+        return mean, False
+    clamped = mean.copy()
+    clamped[0] = np.clip(mean[0], bounds[0], bounds[1])
+    clamped[1] = np.clip(mean[1], bounds[2], bounds[3])
+    return clamped, bool((clamped[:2] != mean[:2]).any())

@@ -172,7 +172,7 @@ def update_indices(scenario, obs) -> Updates:
 
 def method_view(scenario):
     """The scenario as a method sees it: the world-only sections withheld (None)."""
-    return scenario.model_copy(update={"terrain": None, "trajectory": None, "navigation": None})
+    return scenario.model_copy(update={"terrain": None, "trajectory": None, "navigation": None, "faults": None})
 
 
 def check_start_on_map(scenario, nmap) -> None:

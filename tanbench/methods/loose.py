@@ -1,7 +1,12 @@
-"""Built-in method ``loose-dvl``: the loosely coupled position-only PF (filters/loose.py).
+"""Built-in method ``loose-dvl``: the loosely coupled TAN (filters/loose.py).
 
-The beams are projected once per update with the navigation system's attitude; the
-filter's converged estimate is fed back to the navigation system as a position fix.
+Two architectures (``filter.loose_architecture``, docs/model.md Section 6.2):
+
+* ``kalman-feedback`` (recommended): the position-only PF's terrain-only fixes go to an
+  error-state Kalman filter of the navigation system (position, heading, z-gyro bias;
+  navigation/eskf.py), whose corrected navigation drives the PF (closed loop);
+* ``fix-only`` (the earlier baseline): the PF's converged estimate is fed back to the
+  navigation system as a position fix; heading and biases are never corrected.
 """
 
 from __future__ import annotations
@@ -12,7 +17,8 @@ import numpy as np
 
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.methods.tight import divergence_bundle, measurement_sigmas, readings_bundle, resampling_of
+from tanbench.methods.tight import (divergence_bundle, guard_bundle, likelihood_bundle, measurement_sigmas,
+                                    readings_bundle, resampling_of)
 
 
 def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
@@ -20,6 +26,7 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     from tanbench.filters.cloud import gaussian_horizontal
     from tanbench.filters.loose import LOOSE_COLS, init_loose, loose_filter_loop
     from tanbench.filters.params import LooseModel
+    from tanbench.filters.rng import loop_rng
     from tanbench.filters.state import N_LOOSE
     from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -29,30 +36,71 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     half = f.initial_area_m / 2.0
     ranges = obs.dvl_ranges[ctx.updates.rows]
     c = dcm_body_to_nav_numpy(nav.pitch[upd], nav.roll[upd], nav.yaw[upd])  # (K, 3, 3)
-    offsets = np.einsum("kij,bj->kbi", c, obs.dvl_beams) * ranges[:, :, None]
-    d0 = np.ascontiguousarray(np.diff(nav.pos[upd, :2], axis=0))
+    offsets = np.ascontiguousarray(np.einsum("kij,bj->kbi", c, obs.dvl_beams) * ranges[:, :, None])
     model = LooseModel(f.process_noise_velocity_mps * T,
                        math.radians(f.initial_std_heading_deg) if f.loose_heading_noise else 0.0,
                        measurement_sigmas(f)[1], f.outside_map_sigma, f.loose_converged_std_m)
+    rng = loop_rng(ctx.rng, f.random_numbers)
     readings = readings_bundle(f, T)
     x = np.empty((sc.particles, N_LOOSE))
-    init_loose(x, ctx.rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], half)
+    init_loose(x, rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], half)
     if readings.cloud_std > 0.0:
-        gaussian_horizontal(x, ctx.rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], readings.cloud_std)
+        gaussian_horizontal(x, rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], readings.cloud_std)
     k = upd.size
     out_en, var, cov_en = np.empty((k, 2)), np.empty((k, 2)), np.empty(k)
     ess, reinit, fixed = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
-    loose_filter_loop(x, ctx.rng, d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2],
-                      np.ascontiguousarray(offsets), ctx.nmap.kernel_args(), model,
-                      resampling_of(f, LOOSE_COLS), divergence_bundle(f), half, readings, out_en, var, cov_en, ess, reinit,
+    if f.loose_architecture == "kalman-feedback":
+        return _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed)
+    d0 = np.ascontiguousarray(np.diff(nav.pos[upd, :2], axis=0))
+    loose_filter_loop(x, rng, d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2],
+                      offsets, ctx.nmap.kernel_args(), model,
+                      resampling_of(f, LOOSE_COLS), divergence_bundle(f), half, readings, out_en, var, cov_en, ess,
+                      reinit,
                       fixed)
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en,
-                        ess=ess,
-                        reinit=reinit.astype(bool), extra={"position_fix": fixed.astype(float)})
+                        ess=ess, reinit=reinit.astype(bool),
+                        extra={"position_fix": fixed.astype(float), "healthy": fixed.astype(float)})
+
+
+def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed) -> MethodOutput:
+    """The closed loop: PF -> terrain-only fixes -> navigation KF -> corrected navigation -> PF."""
+    from tanbench.filters.loose import LOOSE_COLS, loose_kalman_loop
+    from tanbench.filters.params import LooseKalman
+    from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR
+    from tanbench.navigation.increments import compute_increments
+    from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
+
+    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
+    f, s, T = sc.filter, sc.sensors, sc.sampling_time_s
+    k = upd.size
+    inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    p_kf = np.zeros((N_ERROR, N_ERROR))
+    p_kf[EE, EE] = p_kf[EN, EN] = f.initial_area_m ** 2 / 12.0
+    p_kf[EPSI, EPSI] = math.radians(f.initial_std_heading_deg) ** 2
+    p_kf[EB, EB] = (f.initial_std_gyro_bias_deg_h * DEG_PER_H) ** 2
+    # the random walk that keeps a first-order Gauss-Markov bias's steady-state std (data sheet values)
+    q_bias = s.gyro_bias_instability_deg_h * DEG_PER_H * math.sqrt(2.0 * T / s.gyro_bias_corr_time_s)
+    kf = LooseKalman(f.process_noise_velocity_mps * T, s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
+                     q_bias, max(1, int(round(f.loose_fix_interval_s / T))), f.loose_fix_gate, f.loose_fix_floor_m,
+                     f.loose_fix_max_std_m, f.loose_fix_misses)
+    out_en[0] = nav.pos[upd[0], :2]
+    out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
+    rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
+    loose_kalman_loop(x, rng, inc, nav.yaw[upd], nav.pos[upd, 2], offsets, ctx.nmap.kernel_args(), model,
+                      resampling_of(f, LOOSE_COLS), divergence_bundle(f), f.initial_area_m / 2.0,
+                      likelihood_bundle(f, ctx.nmap), guard_bundle(f, ctx.nmap), kf, p_kf,
+                      out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
+    return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], yaw=out_yaw, var_e=var[:, 0], var_n=var[:, 1],
+                        var_heading=np.degrees(np.sqrt(var_yaw)) ** 2, ess=ess, reinit=reinit.astype(bool),
+                        extra={"position_fix": fixed.astype(float), "fix_accepted": fixed.astype(float),
+                               "fix_rejected": rejected.astype(float), "healthy": healthy.astype(float),
+                               "var_yaw": var_yaw, "bias_z_deg_h": out_bias / DEG_PER_H})
 
 
 LOOSE_DVL = register(MethodRecord(
-    name="loose-dvl", seed_id=3, builtin=True, run=run_loose_dvl, states=("east", "north"),
-    series=("position_fix",),
-    summary="a loosely coupled position-only particle filter feeding position fixes back to the navigation system",
-    cost_ns=60.0, color="tab:purple", linestyle=":", bound=("dvl", "position")))
+    name="loose-dvl", seed_id=3, builtin=True, run=run_loose_dvl,
+    states=("east", "north", "heading", "gyro_bias_z"),
+    series=("position_fix", "healthy", "fix_accepted", "fix_rejected", "var_yaw", "bias_z_deg_h"),
+    summary="loosely coupled TAN: a position-only particle filter whose terrain fixes go to the navigation "
+            "system's Kalman filter (position, heading, gyro bias), closed loop (filter.loose_architecture)",
+    cost_ns=65.0, color="tab:purple", linestyle=":", bound=("dvl", "position")))

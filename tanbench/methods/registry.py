@@ -25,7 +25,8 @@ from typing import Callable
 from tanbench.errors import TanbenchError
 
 # the built-in methods: adding one is one new module plus its line here
-BUILTIN_MODULES = ("tanbench.methods.tight", "tanbench.methods.loose")
+BUILTIN_MODULES = ("tanbench.methods.tight", "tanbench.methods.loose", "tanbench.methods.pmf", "tanbench.methods.mpf",
+                   "tanbench.methods.ekf", "tanbench.methods.tercom")
 ENTRY_POINT_GROUP = "tanbench.methods"
 _IMPORT_NAME = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
 

@@ -15,7 +15,7 @@ from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
 
 TIGHT_STATES = ("east", "north", "up", "pitch", "roll", "heading", "gyro_bias_x", "gyro_bias_z")
-TIGHT_SERIES = ("var_pitch", "var_roll", "var_bias_x", "var_bias_z", "bias_x_deg_h", "bias_z_deg_h")
+TIGHT_SERIES = ("var_pitch", "var_roll", "var_bias_x", "var_bias_z", "bias_x_deg_h", "bias_z_deg_h", "healthy")
 
 
 def resampling_bundle(f, regularised_cols: np.ndarray):
@@ -74,6 +74,32 @@ def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
                                 upd, window)
 
 
+def likelihood_bundle(f, nmap):
+    """The :class:`~tanbench.filters.params.Likelihood` bundle: the map-aware kernels run when
+    the map-aware variance or a non-Gaussian density is asked for; the variance grid is
+    the map's representation variance with the map's declared error
+    (``filter.map_aware_likelihood``), else zero (terrain/representation.py)."""
+    from tanbench.filters.params import Likelihood
+    from tanbench.options import LIKELIHOOD
+    from tanbench.terrain.representation import map_variance_grid
+
+    mapaware = f.map_aware_likelihood or f.likelihood != "gaussian"
+    if f.map_aware_likelihood:
+        mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    else:
+        mvar = np.where(np.isnan(nmap.z), np.nan, 0.0) if mapaware else np.zeros((2, 2))
+    return Likelihood(bool(mapaware), LIKELIHOOD[f.likelihood], float(f.student_nu), mvar)
+
+
+def guard_bundle(f, nmap):
+    """The :class:`~tanbench.filters.params.Guard` bundle (spread divergence, keep on map)."""
+    from tanbench.filters.params import Guard
+
+    bounds = np.array([nmap.e0, nmap.e_max, nmap.n0, nmap.n_max]) if f.keep_on_map else np.array([1.0, 0.0, 0.0, 0.0])
+    spread = float(f.divergence_spread_m) if f.divergence_spread_m is not None else np.inf
+    return Guard(spread, f.loose_converged_std_m, bounds)
+
+
 def divergence_bundle(f):
     from tanbench.filters.params import Divergence
 
@@ -84,6 +110,7 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     from tanbench.filters.cloud import gaussian_horizontal
     from tanbench.filters.params import TightModel, TightPrior
     from tanbench.filters.propagate import position_noise
+    from tanbench.filters.rng import loop_rng
     from tanbench.filters.state import N_TIGHT, PITCH, ROLL, U, YAW
     from tanbench.filters.tight import REGULARISED_STATES, init_tight, tight_filter_loop
     from tanbench.navigation.increments import compute_increments
@@ -104,26 +131,29 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     readings = readings_bundle(f, T)
     prior = TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
                        math.radians(f.initial_std_heading_deg), f.initial_std_gyro_bias_deg_h * DEG_PER_H)
+    rng = loop_rng(ctx.rng, f.random_numbers)
     x = np.empty((sc.particles, N_TIGHT))
     k0 = upd[0]
-    init_tight(x, ctx.rng, nav.pos[k0, 0], nav.pos[k0, 1], nav.pos[k0, 2], nav.pitch[k0], nav.roll[k0],
+    init_tight(x, rng, nav.pos[k0, 0], nav.pos[k0, 1], nav.pos[k0, 2], nav.pitch[k0], nav.roll[k0],
                nav.yaw[k0], prior)
     if readings.cloud_std > 0.0:
         gaussian_horizontal(x, ctx.rng, nav.pos[k0, 0], nav.pos[k0, 1], readings.cloud_std)
     k = upd.size
     est, var, cov_en = np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k)
-    ess, reinit = np.empty(k), np.zeros(k, dtype=np.int64)
-    tight_filter_loop(x, ctx.rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
+    ess, reinit, healthy = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
+    tight_filter_loop(x, rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                       np.ascontiguousarray(ranges), np.ascontiguousarray(beams), ctx.nmap.kernel_args(), model,
                       resampling_of(f, REGULARISED_STATES[f.regularised_states]), divergence_bundle(f), prior,
-                      readings, euler_inputs_of(ctx), est, var, cov_en, ess, reinit)
+                      readings, euler_inputs_of(ctx), likelihood_bundle(f, ctx.nmap), guard_bundle(f, ctx.nmap),
+                      est, var, cov_en, ess, reinit, healthy)
     return MethodOutput(
         east=est[:, 0], north=est[:, 1], up=est[:, U], yaw=est[:, YAW],
         var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en, var_u=var[:, U], var_heading=np.degrees(np.sqrt(var[:, YAW])) ** 2,
         ess=ess, reinit=reinit.astype(bool),
         extra={"var_pitch": var[:, PITCH], "var_roll": var[:, ROLL], "var_yaw": var[:, YAW],
                "var_bias_x": var[:, 6], "var_bias_z": var[:, 7],
-               "bias_x_deg_h": est[:, 6] / DEG_PER_H, "bias_z_deg_h": est[:, 7] / DEG_PER_H})
+               "bias_x_deg_h": est[:, 6] / DEG_PER_H, "bias_z_deg_h": est[:, 7] / DEG_PER_H,
+               "healthy": healthy.astype(float)})
 
 
 def run_tight_dvl(ctx: MethodContext) -> MethodOutput:
@@ -141,9 +171,9 @@ TIGHT_DVL = register(MethodRecord(
     series=TIGHT_SERIES + ("var_yaw",),
     summary="the paper's tightly coupled 8-state particle filter (position, attitude, two gyro biases), "
             "weighted by the 4 DVL beams",
-    cost_ns=130.0, color="tab:red", linestyle="--", bound=("dvl", "full")))
+    cost_ns=120.0, color="tab:red", linestyle="--", bound=("dvl", "full")))
 TIGHT_SBE = register(MethodRecord(
     name="tight-sbe", seed_id=2, builtin=True, run=run_tight_sbe, states=TIGHT_STATES,
     series=TIGHT_SERIES + ("var_yaw",),
     summary="the same 8-state particle filter weighted by the single-beam altimeter",
-    cost_ns=100.0, color="tab:blue", linestyle="-.", bound=("sbe", "full")))
+    cost_ns=90.0, color="tab:blue", linestyle="-.", bound=("sbe", "full")))

@@ -26,7 +26,7 @@ import pandas as pd
 
 from tanbench.config import Scenario, flatten
 from tanbench.errors import TanbenchError
-from tanbench.runner import store
+from tanbench import store
 from tanbench.runner.sweep import Sweep
 from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.schema import rows_table
@@ -77,7 +77,7 @@ class Plan:
         share_one = min(1.0, cores / (load + 1))  # the parent alone (compiling)
         share_all = min(1.0, cores / (load + workers))  # every worker busy
         start = (0.0 if warm else COMPILE_S / share_one) + WARM_START_S / share_all
-        return {"compile": start, "tasks": sum(task_cost(t) for t in tasks) / (workers * share_all),
+        return {"compile": start, "tasks": longest_first_makespan([task_cost(t) for t in tasks], workers) / share_all,
                 "fixed": FIXED_S / share_one}
 
 
@@ -91,6 +91,17 @@ class RunReport:
     wall_s: float = 0.0
     errors: list[str] = field(default_factory=list)
     interrupted: bool = False
+
+
+def longest_first_makespan(costs, workers: int) -> float:
+    """Seconds until the last of ``costs`` finishes when each goes, longest first, to the
+    worker that frees up first (how ``run`` schedules them)."""
+    import heapq
+
+    loads = [0.0] * max(1, min(workers, len(costs)))
+    for cost in sorted(costs, reverse=True):
+        heapq.heappush(loads, heapq.heappop(loads) + cost)
+    return max(loads) if costs else 0.0
 
 
 def task_cost(task: Task) -> float:
@@ -357,17 +368,33 @@ def log_session(out: Path, report: "RunReport", plan: Plan, scheduler) -> None:
         pass
 
 
+def shared_inputs(sweep: Sweep) -> tuple[dict, dict]:
+    """What every worker is given at start instead of building it again: the cells' truth
+    maps (file and synthetic) and, for a sweep of at most ``PRELOAD_WORLDS_MAX`` worlds,
+    their noise-free simulations (all built already by ``validate_worlds`` in this
+    process). Identical to what a worker would build, so results do not change."""
+    from tanbench.simulation import PRELOAD_WORLDS_MAX, noise_free_world
+    from tanbench.terrain import sweep_truth_maps
+
+    maps = sweep_truth_maps(c.scenario.terrain for c in sweep.cells)
+    worlds = sorted({json.dumps(c.scenario.world_spec(), sort_keys=True) for c in sweep.cells})
+    shared_worlds = {w: noise_free_world(w) for w in worlds} if len(worlds) <= PRELOAD_WORLDS_MAX else {}
+    return maps, shared_worlds
+
+
 def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progress, report: RunReport, echo):
     from tqdm import tqdm
 
     from tanbench.runner.executors import open_executor
-    from tanbench.terrain import file_truth_maps
 
     from tanbench.runner.executors import warm_up
 
     columns = cell_columns(plan.sweep)
     n_methods = len(plan.sweep.spec.methods)
     workers = min(plan.workers, len(todo)) if scheduler is None else plan.workers
+    # longest first: the last tasks to start are the short ones, so no worker idles while
+    # another finishes a long task at the end (results do not depend on the order)
+    todo = sorted(todo, key=task_cost, reverse=True)
     if scheduler in (None, "local-dask") and not numba_cache_is_warm():
         # compile once here, into numba's on-disk cache, so the workers only load it (a
         # progress bar at 0 % for a minute would look like a hang)
@@ -376,15 +403,16 @@ def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progres
             print(f"compiling the numba kernels (once per install or code change; about {guess:.0f} s on this "
                   f"machine now)...", file=sys.stderr, flush=True)
         started = time.perf_counter()
-        warm_up()
+        warm_up(todo[0].scenario_json)
         if progress:
             print(f"compiled in {time.perf_counter() - started:.0f} s; starting {workers} worker(s)",
                   file=sys.stderr, flush=True)
-    # read here (validate_worlds did), shipped to the workers: they never read map files
-    truth_maps = file_truth_maps(cell.scenario.terrain for cell in plan.sweep.cells)
+    # built or read here (validate_worlds did), shipped to the workers: they never read map
+    # files nor synthesise a seafloor or a noise-free world again (shared_inputs)
+    truth_maps, worlds = shared_inputs(plan.sweep)
     # the executor first: if it cannot start (a Dask address that does not answer), the
     # user sees its one error line and no half-drawn progress bar
-    with open_executor(workers, scheduler, truth_maps) as handle:
+    with open_executor(workers, scheduler, truth_maps, worlds, todo[0].scenario_json) as handle:
         bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
                    dynamic_ncols=True, smoothing=0.05, desc=f"{plan.sweep.name} on {handle.description}")
         pending = {}

@@ -44,8 +44,15 @@ def single_thread_environment() -> None:
     os.environ.update(SINGLE_THREAD_ENV)
 
 
-def warm_up() -> None:
-    """Compile (or load from cache) every jitted kernel with a tiny run of each method."""
+def warm_up(scenario_json: str | None = None) -> None:
+    """Compile (or load from cache) every jitted kernel with a tiny run of each method.
+
+    ``scenario_json`` (a cell of the sweep) sets the terrain and filter options of the
+    tiny run, so a worker warms up the kernels the sweep uses (e.g. the ``FastRng``
+    specialisations) on a map it has been given, instead of synthesising the default one.
+    """
+    import json
+
     import numpy as np
 
     from tanbench.config import Scenario
@@ -53,7 +60,8 @@ def warm_up() -> None:
     from tanbench.methods.registry import builtin_names
     from tanbench.simulation import simulate_vehicle
 
-    scenario = Scenario(duration_s=3.0, particles=16)
+    spec = json.loads(scenario_json) if scenario_json else {}
+    scenario = Scenario(**{**spec, "duration_s": 3.0, "particles": 16})
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(0))
     for method in builtin_names():
         run_method(scenario, method, vehicle, np.random.SeedSequence(1))
@@ -68,12 +76,19 @@ def install_worker_maps(maps: dict) -> None:
     noise_free_world.cache_clear()
 
 
-def _local_worker_init(maps_pickle: bytes) -> None:
+def _local_worker_init(maps_pickle: bytes, worlds_pickle: bytes = b"", scenario_json: str | None = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
     single_thread_environment()
     # the maps come pickled so that numpy is imported only after the line above
     install_worker_maps(pickle.loads(maps_pickle))
-    warm_up()
+    if worlds_pickle:
+        from tanbench.simulation import preload_worlds
+
+        preload_worlds(pickle.loads(worlds_pickle))
+    try:
+        warm_up(scenario_json)
+    except Exception:  # noqa: BLE001 - a cell that cannot run reports itself in its task
+        warm_up()
 
 
 def _dask_worker_init() -> None:
@@ -93,16 +108,20 @@ class ExecutorHandle:
 
 
 @contextmanager
-def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None = None):
+def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None = None,
+                  worlds: dict | None = None, scenario_json: str | None = None):
     """Yield an :class:`ExecutorHandle` for ``workers`` local processes or a Dask scheduler.
 
-    ``truth_maps`` (from :func:`tanbench.terrain.file_truth_maps`) are installed on every
-    worker before it runs a task.
+    ``truth_maps`` (from :func:`tanbench.terrain.sweep_truth_maps`) are installed on every
+    worker before it runs a task; local workers also get ``worlds`` (noise-free worlds by
+    world JSON, :func:`tanbench.simulation.preload_worlds`) and warm up on ``scenario_json``.
     """
     maps_pickle = pickle.dumps(truth_maps or {}, protocol=pickle.HIGHEST_PROTOCOL)
     if scheduler is None:
+        worlds_pickle = pickle.dumps(worlds, protocol=pickle.HIGHEST_PROTOCOL) if worlds else b""
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_local_worker_init, initargs=(maps_pickle,))
+                                   initializer=_local_worker_init,
+                                   initargs=(maps_pickle, worlds_pickle, scenario_json))
 
         def stop_now():
             for proc in list(getattr(pool, "_processes", {}).values()):

@@ -1,8 +1,8 @@
 """Random streams of a sweep: one root ``SeedSequence``, keyed by spec, never by position.
 
-* the vehicle data of run r of a cell comes from (root, world key, r): every cell with
-  the same world (terrain, trajectory, sensors, initial errors) and every method share
-  it, so comparisons across methods, particle counts, map resolutions, noise levels or
+* the vehicle data of run r of a cell comes from (root, pairing key, r): every cell with
+  the same world (terrain, trajectory, sensors, initial errors; world faults aside, so a
+  fault is measured on the fault-free cell's runs) and every method share it, so comparisons across methods, particle counts, map resolutions, noise levels or
   sampling times are paired (common random numbers);
 * the filter noise of a method comes from (root, cell key, method, r).
 
@@ -26,7 +26,7 @@ def _key_int(hex_key: str) -> int:
 
 def vehicle_seed(root: int, scenario: Scenario, run: int) -> np.random.SeedSequence:
     """The seed of run ``run``'s simulated vehicle data."""
-    return np.random.SeedSequence(root, spawn_key=(VEHICLE_STREAM, _key_int(scenario.world_key()), run))
+    return np.random.SeedSequence(root, spawn_key=(VEHICLE_STREAM, _key_int(scenario.pairing_key()), run))
 
 
 def filter_seed(root: int, scenario: Scenario, method: str, run: int) -> np.random.SeedSequence:

@@ -22,7 +22,7 @@ import itertools
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
@@ -61,6 +61,8 @@ class SweepSpec(BaseModel):
     scenario: dict[str, Any] = Field(default_factory=dict)
     tables: dict[str, dict[str, list[Value]]] = Field(default_factory=dict)
     grid: dict[str, list[Value]] | None = None
+    table_columns: list[Literal["divergence_rate", "mean_filter_wall_s"]] = Field(
+        default_factory=list, description="extra columns of this sweep's summary tables")
 
     @field_validator("*", mode="before")
     @classmethod

@@ -11,9 +11,18 @@ import numpy as np
 
 
 def measure_velocity(vel_body: np.ndarray, ping_index: np.ndarray, scale_error: float,
-                     noise_mps: float, rng) -> tuple[np.ndarray, float]:
-    """Held DVL velocity at every IMU sample (n, 3), and the scale error drawn."""
+                     noise_mps: float, rng, lost: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Held DVL velocity at every IMU sample (n, 3), and the scale error drawn.
+
+    ``lost`` (pings,) marks pings without bottom lock (a world fault): the last velocity
+    measured before them is held through them (the first ping is always kept).
+    """
     scale = rng.uniform(-1.0, 1.0) * scale_error
     pings = vel_body[ping_index] * (1.0 + scale) + noise_mps * rng.standard_normal((ping_index.size, 3))
+    if lost is not None:
+        valid = ~lost
+        valid[0] = True
+        last_valid = np.maximum.accumulate(np.where(valid, np.arange(ping_index.size), 0))
+        pings = pings[last_valid]
     held_from = np.searchsorted(ping_index, np.arange(vel_body.shape[0]), side="right") - 1
     return pings[np.clip(held_from, 0, None)], scale

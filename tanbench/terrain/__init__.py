@@ -16,7 +16,7 @@ from functools import lru_cache
 
 from tanbench.terrain.grid import Map
 
-__all__ = ["Map", "truth_map", "navigation_map", "file_truth_maps", "install_truth_maps"]
+__all__ = ["Map", "truth_map", "navigation_map", "file_truth_maps", "sweep_truth_maps", "install_truth_maps"]
 
 # truth maps shipped to this process, by terrain key (see install_truth_maps)
 _INSTALLED: dict[str, Map] = {}
@@ -39,6 +39,12 @@ def navigation_map(spec, resolution_m: float) -> Map:
 def file_truth_maps(specs) -> dict[str, Map]:
     """The truth maps of the file terrains among ``specs``, by terrain key, read here (once)."""
     return {_key(spec): truth_map(spec) for spec in specs if spec.kind == "file"}
+
+
+def sweep_truth_maps(specs) -> dict[str, Map]:
+    """The truth maps of every terrain among ``specs`` (file or synthetic), by terrain key:
+    what a sweep's workers are given so that none synthesises a seafloor again."""
+    return {_key(spec): truth_map(spec) for spec in specs}
 
 
 def install_truth_maps(maps: dict[str, Map]) -> None:
@@ -85,4 +91,5 @@ def _navigation_cached(key: str, resolution_m: float) -> Map:
     from tanbench.terrain.derive import derive_navigation_map
 
     spec = TerrainSpec(**json.loads(key))
-    return derive_navigation_map(_truth(key), resolution_m, spec.map_error_m, spec.seed)
+    return derive_navigation_map(_truth(key), resolution_m, spec.map_error_m, spec.seed,
+                                 spec.map_error_correlation_m)

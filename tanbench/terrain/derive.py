@@ -10,7 +10,9 @@ value". tanbench derives each navigation map from the (finer) truth the same way
    truth is first resampled bilinearly to spacing resolution / k with k = ceil(ratio);
 3. map-level error: i.i.d. Gaussian noise of ``map_error_m`` (0.4 m) on every node,
    drawn from a stream fixed by the terrain seed and the resolution, so a given map is
-   the same fixed artefact in every run, like a real survey map.
+   the same fixed artefact in every run, like a real survey map. With
+   ``terrain.map_error_correlation_m`` > 0 (a world fault) the same draws are smoothed
+   into a spatially correlated field of the same std (:func:`map_error_field`).
 
 The sonar sees the truth; the filters see only the derived map. The block averages
 sit at block centres, so the map's origin is shifted by (k - 1) / 2 truth cells.
@@ -27,7 +29,7 @@ from tanbench.terrain.grid import Map, bilinear_numpy
 
 
 def derive_navigation_map(truth: Map, resolution_m: float, map_error_m: float = 0.4,
-                          seed: int = 0) -> Map:
+                          seed: int = 0, correlation_m: float = 0.0) -> Map:
     """The navigation map at ``resolution_m`` metres derived from ``truth``."""
     ratio = resolution_m / truth.resolution
     if ratio < 1.0 - 1e-9:
@@ -56,13 +58,24 @@ def derive_navigation_map(truth: Map, resolution_m: float, map_error_m: float = 
         )
     blocks = z[: ny * k, : nx * k].reshape(ny, k, nx, k).mean(axis=(1, 3))
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(0x3A9, int(round(resolution_m * 1000)))))
-    blocks = blocks + map_error_m * rng.standard_normal(blocks.shape)
+    blocks = blocks + map_error_m * map_error_field(rng.standard_normal(blocks.shape), correlation_m / (fine.res_e * k))
     shift = (k - 1) / 2.0
     return Map(z=blocks, e0=fine.e0 + shift * fine.res_e, n0=fine.n0 + shift * fine.res_n,
                res_e=fine.res_e * k, res_n=fine.res_n * k,
                name=f"{truth.name}@{resolution_m:g}m",
                meta={**truth.meta, "derived_from": truth.name, "resolution_m": resolution_m,
                      "map_error_m": map_error_m})
+
+
+def map_error_field(white: np.ndarray, correlation_nodes: float) -> np.ndarray:
+    """Unit-std map error: the white draws themselves (i.i.d. nodes) or, for a correlation
+    length of ``correlation_nodes`` > 0 map cells, the draws smoothed by a Gaussian kernel of
+    that std and rescaled to unit std (a stationary field with Gaussian correlation
+    exp(-d^2 / (4 L^2)); a survey's levelling and tide errors are smooth over a swath)."""
+    if correlation_nodes <= 0:
+        return white
+    field = ndimage.gaussian_filter(white, sigma=correlation_nodes, mode="wrap")
+    return field / field.std()
 
 
 def _resample(truth: Map, spacing: float) -> Map:

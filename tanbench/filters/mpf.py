@@ -1,0 +1,270 @@
+"""Marginalized (Rao-Blackwellised) particle filter (Schön, Gustafsson & Nordlund 2005; Karlsson 2005).
+
+Split of the state:
+
+* **particles** carry the nonlinear states, horizontal position and yaw (E, N, psi): the
+  terrain measurement is a nonlinear function of them (the map), and the yaw enters the
+  position increments through a rotation;
+* **a Kalman filter per particle** carries the linear ones, given the particle's trajectory:
+  - the depth (or tide) bias ``b`` of the pressure-derived up coordinate: every beam's
+    terrain-altitude innovation is nu_i = U_nav + o_up,i - h(p_i) = b + v_i, linear in b
+    with H = 1 once the particle fixes p_i;
+  - the z-gyro bias ``eps_z``: the yaw dynamics are psi' = psi + dpsi_nav - S_z eps_z + w,
+    linear in eps_z with the known coefficient S_z (``navigation/increments.py``); the
+    sampled yaw transition is the KF's measurement of eps_z (the MPF's "nonlinear state
+    dynamics as measurement" step). Its effect on position (-eps_z J A_z, under a
+    millimetre per interval) uses the KF mean.
+
+  The two KFs are independent (b only meets the terrain measurement, eps_z only the yaw
+  transition), so each particle carries two means and two variances: columns
+  [E, N, psi, b, P_b, eps_z, P_eps]. Pitch, roll and up are taken from the navigation
+  system (levelling and pressure), the x-gyro bias is dropped (its heading effect scales
+  with sin(roll) ~ 0: it is barely observable, docs/model.md).
+
+The weights are the marginal likelihood of the beams with b integrated out,
+N(nu; b_hat 1, P_b 1 1^T + sigma_u^2 I), in closed form (Sherman-Morrison); the yaw is
+sampled from its marginal N(psi + dpsi - S_z eps_hat, S_z^2 P_eps + q_psi). Resampling,
+regularisation (position and yaw) and divergence handling are the tight filter's.
+The kernels are compiled without fastmath: with FMA contraction a kernel's last bits
+depended on whether it was compiled inline in the loop or on its own first, so a run
+could differ by an ulp between processes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from tanbench.filters.estimate import weighted_estimate
+from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
+from tanbench.filters.trig import sin_cos
+from tanbench.navigation.increments import D0E, D0N, DYAW, JAZE, JAZN, SZ
+from tanbench.terrain.grid import bilinear, bilinear_numpy
+
+E, N, PSI, B, PB, EPS, PEPS = range(7)
+N_MPF = 7
+REG_COLS = np.array([E, N, PSI], dtype=np.int64)
+
+
+@nb.njit(cache=True)
+def mpf_propagate(x, inc, yaw_nav0, noise, sig_pos, q_psi, q_eps, q_b):
+    """Move particles and their Kalman filters over one interval; ``noise`` (M, 3) standard normals."""
+    for j in range(x.shape[0]):
+        s, c = sin_cos(x[j, PSI] - yaw_nav0)
+        eps = x[j, EPS]
+        ue = inc[D0E] - eps * inc[JAZE]
+        un = inc[D0N] - eps * inc[JAZN]
+        x[j, E] += c * ue - s * un + sig_pos * noise[j, 0]
+        x[j, N] += s * ue + c * un + sig_pos * noise[j, 1]
+        # yaw from its marginal, then that transition updates the bias KF
+        sz = inc[SZ]
+        s_var = sz * sz * x[j, PEPS] + q_psi
+        step = inc[DYAW] - sz * eps + math.sqrt(s_var) * noise[j, 2]
+        x[j, PSI] += step
+        innov = step - (inc[DYAW] - sz * eps)
+        gain = -sz * x[j, PEPS] / s_var
+        x[j, EPS] = eps + gain * innov
+        x[j, PEPS] = x[j, PEPS] * q_psi / s_var + q_eps
+        x[j, PB] += q_b
+
+
+def mpf_propagate_numpy(x, inc, yaw_nav0, noise, sig_pos, q_psi, q_eps, q_b):
+    """Plain-numpy reference of :func:`mpf_propagate` (returns a new array)."""
+    x = x.copy()
+    d = x[:, PSI] - yaw_nav0
+    eps = x[:, EPS].copy()
+    u = np.stack([inc[D0E] - eps * inc[JAZE], inc[D0N] - eps * inc[JAZN]], 1)
+    x[:, E] += np.cos(d) * u[:, 0] - np.sin(d) * u[:, 1] + sig_pos * noise[:, 0]
+    x[:, N] += np.sin(d) * u[:, 0] + np.cos(d) * u[:, 1] + sig_pos * noise[:, 1]
+    s_var = inc[SZ] ** 2 * x[:, PEPS] + q_psi
+    pred = inc[DYAW] - inc[SZ] * eps
+    step = pred + np.sqrt(s_var) * noise[:, 2]
+    x[:, PSI] += step
+    x[:, EPS] = eps - inc[SZ] * x[:, PEPS] / s_var * (step - pred)
+    x[:, PEPS] = x[:, PEPS] * q_psi / s_var + q_eps
+    x[:, PB] += q_b
+    return x
+
+
+@nb.njit(cache=True)
+def mpf_loglik_update(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, out):
+    """Marginal log-likelihood of the beams per particle into ``out`` (b integrated out); then the
+    depth-bias KF update. ``offsets_k`` (m, 3) beams with the navigation attitude. Returns the best
+    per-beam chi^2 (about the KF mean)."""
+    m = offsets_k.shape[0]
+    r2 = sig_u * sig_u
+    outside_sq = outside_sigma * outside_sigma
+    best = np.inf
+    for j in range(x.shape[0]):
+        s, c = sin_cos(x[j, PSI] - yaw_nav)
+        bhat = x[j, B]
+        pb = x[j, PB]
+        used = 0
+        outside = 0
+        sy = 0.0
+        syy = 0.0
+        for i in range(m):
+            if offsets_k[i, 2] != offsets_k[i, 2]:
+                continue
+            oe = offsets_k[i, 0]
+            on = offsets_k[i, 1]
+            h = bilinear(z, e0, n0, inv_re, inv_rn, x[j, E] + c * oe - s * on, x[j, N] + s * oe + c * on)
+            if h != h:
+                outside += 1
+                continue
+            d = up + offsets_k[i, 2] - h - bhat
+            sy += d
+            syy += d * d
+            used += 1
+        quad = syy / r2 - pb * sy * sy / (r2 * (r2 + used * pb))
+        out[j] = -0.5 * (quad + outside * outside_sq + math.log(1.0 + used * pb / r2))
+        if used + outside > 0:
+            chi = (syy / r2 + outside * outside_sq) / (used + outside)
+            if chi < best:
+                best = chi
+        if used > 0:
+            p_new = 1.0 / (1.0 / pb + used / r2) if pb > 0 else 0.0
+            x[j, B] = bhat + p_new * sy / r2
+            x[j, PB] = p_new
+    return best
+
+
+def mpf_loglik_update_numpy(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma):
+    """Plain-numpy reference of :func:`mpf_loglik_update`: (loglik, best chi^2, updated x), with the
+    marginal likelihood evaluated by the dense Gaussian density (no Sherman-Morrison)."""
+    x = x.copy()
+    ok = ~np.isnan(offsets_k[:, 2])
+    o = offsets_k[ok]
+    d = x[:, PSI] - yaw_nav
+    c, s = np.cos(d)[:, None], np.sin(d)[:, None]
+    qe = x[:, E:E + 1] + c * o[:, 0] - s * o[:, 1]
+    qn = x[:, N:N + 1] + s * o[:, 0] + c * o[:, 1]
+    h = bilinear_numpy(z, e0, n0, inv_re, inv_rn, qe, qn)
+    ll = np.empty(len(x))
+    best = np.inf
+    for j in range(len(x)):
+        inside = ~np.isnan(h[j])
+        y = up + o[inside, 2] - h[j, inside]
+        k = y.size
+        cov = sig_u**2 * np.eye(k) + x[j, PB] * np.ones((k, k))
+        r = y - x[j, B]
+        sign, logdet = np.linalg.slogdet(cov / sig_u**2) if k else (1.0, 0.0)
+        outside = (~inside).sum()
+        ll[j] = -0.5 * (r @ np.linalg.solve(cov, r) + outside * outside_sigma**2 + logdet) if k else \
+            -0.5 * outside * outside_sigma**2
+        if k + outside:
+            best = min(best, ((r**2).sum() / sig_u**2 + outside * outside_sigma**2) / (k + outside))
+        if k:
+            p_new = 1.0 / (1.0 / x[j, PB] + k / sig_u**2)
+            x[j, B] = x[j, B] + p_new * r.sum() / sig_u**2
+            x[j, PB] = p_new
+    return ll, best, x
+
+
+@nb.njit(cache=True)
+def init_mpf(x, rng, centre_e, centre_n, yaw, half_side, std_yaw, var_b, var_eps):
+    for j in range(x.shape[0]):
+        x[j, E] = centre_e + rng.uniform(-half_side, half_side)
+        x[j, N] = centre_n + rng.uniform(-half_side, half_side)
+        x[j, PSI] = yaw + std_yaw * rng.standard_normal()
+        x[j, B] = 0.0
+        x[j, PB] = var_b
+        x[j, EPS] = 0.0
+        x[j, PEPS] = var_eps
+
+
+@nb.njit(cache=True)
+def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps, q_b, sig_u, outside_sigma,
+             rs, div, half_side, std_yaw, var_b, var_eps, est, var, ess_out, reinit_out):
+    """Run the MPF over K updates; ``est``/``var`` (K, 7): particle means/variances of the columns.
+
+    ``zmap`` is the map's ``MapArgs``, ``rs`` a ``Resampling`` bundle (its ``cols``: E, N, psi),
+    ``div`` a ``Divergence`` bundle (``tanbench.filters.params``).
+    """
+    z, e0, n0, inv_re, inv_rn = zmap
+    div_sigma, div_steps = div
+    m = x.shape[0]
+    steps = offsets.shape[0]
+    logw = np.zeros(m)
+    ll = np.empty(m)
+    w = np.empty(m)
+    noise = np.empty((m, 3))
+    uni = np.empty(m)
+    idx = np.empty(m, dtype=np.int64)
+    scratch = np.empty_like(x)
+    mean = np.empty(N_MPF)
+    v = np.empty(N_MPF)
+    cov = np.empty((2, 2))
+    bad = 0
+    for k in range(steps):
+        if k > 0:
+            for j in range(m):
+                noise[j, 0] = rng.standard_normal()
+                noise[j, 1] = rng.standard_normal()
+                noise[j, 2] = rng.standard_normal()
+            mpf_propagate(x, inc[k - 1], nav_yaw[k - 1], noise, sig_pos, q_psi, q_eps, q_b)
+        best = mpf_loglik_update(x, offsets[k], nav_up[k], nav_yaw[k], z, e0, n0, inv_re, inv_rn, sig_u,
+                                 outside_sigma, ll)
+        for j in range(m):
+            logw[j] += ll[j]
+        normalize_log_weights(logw, w)
+        weighted_estimate(x, w, PSI, nav_yaw[k], mean, v, cov)
+        ess = effective_sample_size(w)
+        est[k, :] = mean
+        var[k, :] = v
+        ess_out[k] = ess
+        reinit_out[k] = 0
+        if best < np.inf:
+            bad = bad + 1 if best > div_sigma * div_sigma else 0
+        if bad >= div_steps:
+            init_mpf(x, rng, mean[E], mean[N], nav_yaw[k], half_side, std_yaw, var_b, var_eps)
+            logw[:] = 0.0
+            bad = 0
+            reinit_out[k] = 1
+            continue
+        resample_and_regularise(x, w, logw, ess, rng, rs, 3, math.sqrt(v[E] + v[N]), uni, idx, scratch)
+
+
+def run_mpf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, inc, beams, ranges, zargs, rng, *,
+            particles=1000, initial_area_m=150.0, initial_std_heading_deg=30.0, initial_std_gyro_bias_deg_h=25.0,
+            initial_std_depth_bias_m=2.0, sig_pos=0.07, sig_att_step=None, sampling_time_s=1.0,
+            gyro_bias_corr_time_s=300.0, gyro_bias_instability_deg_h=25.0, depth_bias_walk_m_sqrt_s=0.001,
+            sig_u=1.0, outside_sigma=5.0, resampling=None, divergence=(4.0, 10)) -> dict:
+    """MPF on plain arrays; ``inc`` (K-1, 12) increments; ``rng`` the run's Generator.
+
+    ``resampling`` is a ``Resampling`` bundle (default: systematic at ESS < M/2, Liu-West
+    h = 0.1 on E, N, psi, 2 m minimum spread), ``divergence`` (sigma, steps).
+    """
+    from tanbench.filters.beams import nav_frame_offsets
+    from tanbench.filters.params import Divergence, MapArgs, Resampling
+    from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
+
+    if resampling is None:
+        resampling = Resampling(0, 0.5, 1, REG_COLS, 0.1, 2.0)
+    offsets = nav_frame_offsets(nav_pitch, nav_roll, nav_yaw, beams, ranges)
+    k_steps = offsets.shape[0]
+    if sig_att_step is None:
+        sig_att_step = 2.0 * DEG_PER_SQRT_H * math.sqrt(sampling_time_s)
+    q_eps = 2.0 * (gyro_bias_instability_deg_h * DEG_PER_H) ** 2 * sampling_time_s / gyro_bias_corr_time_s
+    x = np.empty((particles, N_MPF))
+    std_yaw = math.radians(initial_std_heading_deg)
+    var_b = initial_std_depth_bias_m**2
+    var_eps = (initial_std_gyro_bias_deg_h * DEG_PER_H) ** 2
+    nav_en = np.asarray(nav_en, dtype=float)
+    nav_yaw = np.ascontiguousarray(nav_yaw, dtype=float)
+    init_mpf(x, rng, nav_en[0, 0], nav_en[0, 1], nav_yaw[0], initial_area_m / 2.0, std_yaw, var_b, var_eps)
+    est = np.empty((k_steps, N_MPF))
+    var = np.empty((k_steps, N_MPF))
+    ess = np.empty(k_steps)
+    reinit = np.zeros(k_steps, dtype=np.int64)
+    mpf_loop(x, rng, np.ascontiguousarray(inc), nav_yaw, np.ascontiguousarray(nav_up, dtype=float), offsets,
+             MapArgs(*zargs), sig_pos, sig_att_step**2, q_eps, depth_bias_walk_m_sqrt_s**2 * sampling_time_s, sig_u,
+             outside_sigma, resampling, Divergence(*divergence), initial_area_m / 2.0, std_yaw, var_b, var_eps,
+             est, var, ess, reinit)
+    return {"est_e": est[:, E], "est_n": est[:, N], "est_yaw": est[:, PSI],
+            "var_e": var[:, E], "var_n": var[:, N], "var_yaw": var[:, PSI],
+            "depth_bias_m": est[:, B], "var_depth_bias": est[:, PB] + var[:, B],
+            "bias_z": est[:, EPS], "var_bias_z": est[:, PEPS] + var[:, EPS],
+            "ess": ess, "reinit": reinit}

@@ -1,0 +1,407 @@
+"""Point-mass filter (Bergman 1999; MBARI TRN): a grid Bayesian filter over position and heading.
+
+The posterior is a bank of ``H`` heading hypotheses. Slice k holds the navigation heading
+plus a fixed offset ``delta_k`` and a square ``n x n`` grid of probability masses over
+east/north, centred on its own ``centre[k]`` with the spacing ``s`` shared by all
+slices. One update:
+
+1. **prediction**: every slice's grid moves by the navigation system's displacement
+   rotated by its own heading offset, ``Rz(delta_k) D0`` (an exact translation of the
+   grid's coordinates, no interpolation). The process noise (Table 2's velocity noise
+   plus the cross-track effect of the heading uncertainty *within* one slice) is
+   accumulated and applied as a separable Gaussian convolution once it reaches a
+   quarter of a cell's variance, so tiny noise is neither lost nor smeared by
+   interpolation every update. The heading drift (gyro bias and random walk) moves mass
+   between neighbouring slices: a random walk on the heading lattice;
+2. **likelihood**: the same map-aware terrain-altitude likelihood as the loose particle
+   filter (``likelihood.loglik_loose``) at every grid node, the beams projected with the
+   navigation attitude turned by ``delta_k``;
+3. **re-gridding**: each slice re-centres on its own mean when the mean drifts an
+   eighth of the grid away; the shared spacing follows the posterior,
+   ``s = max(s_min, 8 sigma / (n - 1))`` (hysteresis: only when it changes by 2x), so
+   a converged posterior is resolved finely and a spreading one (a plane seafloor) is
+   still covered. Re-gridding samples the old density bilinearly at the new nodes.
+   Slices without mass are skipped and parked at the global mean.
+
+The bank is centred on the navigation heading and spans +-2.5 sigma of the heading prior
+(at most ``heading_span``), so a small prior gets fine slices and the paper's 30 deg gets
+15 slices 8.6 deg apart over +-60 deg.
+
+With ``H = 1`` this is the position-only PMF (TRN's): the whole 30 deg heading prior
+then enters as cross-track process noise, as in the loose particle filter.
+The initial grid covers the same ``initial_area`` square as the particle filters'
+initial cloud; the heading prior N(0, sigma_psi^2) weights the slices.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from tanbench.filters.likelihood import loglik_loose
+
+DEAD_MASS = 1e-12
+
+
+@nb.njit(cache=True)
+def grid_nodes(ce, cn, s, n, out):
+    """Node positions (n*n, 2) of a grid centred on (ce, cn) with spacing s, row-major (north rows)."""
+    c = 0.5 * (n - 1)
+    for i in range(n):
+        for j in range(n):
+            out[i * n + j, 0] = ce + (j - c) * s
+            out[i * n + j, 1] = cn + (i - c) * s
+
+
+def grid_nodes_numpy(ce, cn, s, n):
+    c = 0.5 * (n - 1)
+    jj, ii = np.meshgrid(np.arange(n), np.arange(n))
+    return np.stack([ce + (jj.ravel() - c) * s, cn + (ii.ravel() - c) * s], axis=1)
+
+
+@nb.njit(cache=True)
+def gaussian_kernel(sigma_cells):
+    """Sampled, normalised Gaussian of std ``sigma_cells`` truncated at 3 sigma (at least 1 tap each side)."""
+    r = max(1, int(math.ceil(3.0 * sigma_cells)))
+    k = np.empty(2 * r + 1)
+    total = 0.0
+    for t in range(-r, r + 1):
+        v = math.exp(-0.5 * (t / sigma_cells) ** 2) if sigma_cells > 0 else (1.0 if t == 0 else 0.0)
+        k[t + r] = v
+        total += v
+    for t in range(2 * r + 1):
+        k[t] /= total
+    return k
+
+
+@nb.njit(cache=True)
+def blur_separable(p, sigma_cells, scratch):
+    """Convolve grid ``p`` (n, n) in place with a Gaussian of std ``sigma_cells``; zero outside."""
+    k = gaussian_kernel(sigma_cells)
+    r = (k.shape[0] - 1) // 2
+    n0, n1 = p.shape
+    for i in range(n0):
+        for j in range(n1):
+            acc = 0.0
+            for t in range(-r, r + 1):
+                jj = j + t
+                if 0 <= jj < n1:
+                    acc += k[t + r] * p[i, jj]
+            scratch[i, j] = acc
+    for i in range(n0):
+        for j in range(n1):
+            acc = 0.0
+            for t in range(-r, r + 1):
+                ii = i + t
+                if 0 <= ii < n0:
+                    acc += k[t + r] * scratch[ii, j]
+            p[i, j] = acc
+
+
+def blur_separable_numpy(p, sigma_cells):
+    r = max(1, int(math.ceil(3.0 * sigma_cells)))
+    t = np.arange(-r, r + 1)
+    k = np.exp(-0.5 * (t / sigma_cells) ** 2) if sigma_cells > 0 else (t == 0).astype(float)
+    k = k / k.sum()
+    rows = np.array([np.convolve(row, k, mode="same") for row in p])
+    return np.array([np.convolve(col, k, mode="same") for col in rows.T]).T
+
+
+@nb.njit(cache=True)
+def resample_grid(p, ce, cn, s, ce_new, cn_new, s_new, out):
+    """Density of grid ``p`` (centre (ce, cn), spacing s) sampled bilinearly at the nodes of a new grid
+    (same node count, centre (ce_new, cn_new), spacing s_new), into ``out``; zero outside the old grid."""
+    n = p.shape[0]
+    c = 0.5 * (n - 1)
+    for i in range(n):
+        fy = ((cn_new + (i - c) * s_new) - cn) / s + c
+        for j in range(n):
+            fx = ((ce_new + (j - c) * s_new) - ce) / s + c
+            if fx < 0.0 or fy < 0.0 or fx > n - 1 or fy > n - 1:
+                out[i, j] = 0.0
+                continue
+            j0 = min(int(fx), n - 2)
+            i0 = min(int(fy), n - 2)
+            tx = fx - j0
+            ty = fy - i0
+            out[i, j] = ((p[i0, j0] * (1 - tx) + p[i0, j0 + 1] * tx) * (1 - ty)
+                         + (p[i0 + 1, j0] * (1 - tx) + p[i0 + 1, j0 + 1] * tx) * ty)
+
+
+def resample_grid_numpy(p, ce, cn, s, ce_new, cn_new, s_new):
+    from tanbench.terrain.grid import bilinear_numpy
+
+    n = p.shape[0]
+    c = 0.5 * (n - 1)
+    nodes = grid_nodes_numpy(ce_new, cn_new, s_new, n)
+    v = bilinear_numpy(p, ce - c * s, cn - c * s, 1.0 / s, 1.0 / s, nodes[:, 0], nodes[:, 1])
+    return np.nan_to_num(v, nan=0.0).reshape(n, n)
+
+
+@nb.njit(cache=True)
+def slice_moments(p, ce, cn, s):
+    """(mass, mean e, mean n, var e, var n, cov en) of one grid."""
+    n = p.shape[0]
+    c = 0.5 * (n - 1)
+    m = 0.0
+    se = 0.0
+    sn = 0.0
+    see = 0.0
+    snn = 0.0
+    sen = 0.0
+    for i in range(n):
+        dn = (i - c) * s
+        for j in range(n):
+            v = p[i, j]
+            de = (j - c) * s
+            m += v
+            se += v * de
+            sn += v * dn
+            see += v * de * de
+            snn += v * dn * dn
+            sen += v * de * dn
+    if m <= 0.0:
+        return 0.0, ce, cn, 0.0, 0.0, 0.0
+    me = se / m
+    mn = sn / m
+    return (m, ce + me, cn + mn, max(see / m - me * me, 0.0), max(snn / m - mn * mn, 0.0),
+            sen / m - me * mn)
+
+
+def slice_moments_numpy(p, ce, cn, s):
+    n = p.shape[0]
+    nodes = grid_nodes_numpy(ce, cn, s, n)
+    w = p.ravel()
+    m = w.sum()
+    if m <= 0:
+        return 0.0, ce, cn, 0.0, 0.0, 0.0
+    mu = w @ nodes / m
+    d = nodes - mu
+    return (m, mu[0], mu[1], w @ (d[:, 0] ** 2) / m, w @ (d[:, 1] ** 2) / m, w @ (d[:, 0] * d[:, 1]) / m)
+
+
+@nb.njit(cache=True)
+def mix_headings(p, centres, s, a, buf, out):
+    """Heading random walk on the slice lattice: each slice passes a fraction ``a`` of its mass to
+    each neighbour (re-sampled onto the neighbour's grid). ``out`` (H, n, n) receives the result."""
+    h = p.shape[0]
+    for k in range(h):
+        nb_count = (1 if k > 0 else 0) + (1 if k < h - 1 else 0)
+        out[k] = (1.0 - a * nb_count) * p[k]
+        for q in (k - 1, k + 1):
+            if 0 <= q < h:
+                resample_grid(p[q], centres[q, 0], centres[q, 1], s, centres[k, 0], centres[k, 1], s, buf)
+                out[k] += a * buf
+
+
+def mix_headings_numpy(p, centres, s, a):
+    h = p.shape[0]
+    out = np.empty_like(p)
+    for k in range(h):
+        nbs = [q for q in (k - 1, k + 1) if 0 <= q < h]
+        out[k] = (1.0 - a * len(nbs)) * p[k]
+        for q in nbs:
+            out[k] += a * resample_grid_numpy(p[q], *centres[q], s, *centres[k], s)
+    return out
+
+
+@nb.njit(cache=True)
+def pmf_init(p, centres, deltas, centre_e, centre_n, sig_heading0):
+    """Uniform mass over every slice's grid, slices weighted by the heading prior N(0, sig^2)."""
+    h = p.shape[0]
+    total = 0.0
+    for k in range(h):
+        wk = math.exp(-0.5 * (deltas[k] / sig_heading0) ** 2) if (h > 1 and sig_heading0 > 0) else 1.0
+        p[k, :, :] = wk
+        total += wk * p.shape[1] * p.shape[2]
+        centres[k, 0] = centre_e
+        centres[k, 1] = centre_n
+    p /= total
+
+
+@nb.njit(cache=True)
+def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, z, e0, n0, inv_re, inv_rn,
+             n, deltas, sig_heading0, half_side, sig_pos, sig_cross, sig_heading_step, s_min,
+             sig_u, outside_sigma, div_sigma, div_steps,
+             est, var, reinit_out, live_out):
+    """Run the PMF over all K updates.
+
+    ``nav_en`` (K, 2), ``nav_up`` (K,), ``nav_yaw`` (K,): navigation solution at the updates;
+    ``d0`` (K-1, 2): its displacements; ``offsets`` (K, m, 3): beam vectors times ranges in
+    the navigation frame with the navigation attitude (NaN = no range). ``deltas`` (H,) heading
+    offsets (rad); ``sig_pos`` position noise per update (m); ``sig_cross`` cross-track noise
+    per metre travelled (rad: the heading uncertainty inside one slice);
+    ``sig_heading_step`` heading random walk per update (rad).
+    Fills ``est`` (K, 3) east, north, yaw; ``var`` (K, 3); ``reinit_out`` and ``live_out``
+    (K,) (slices evaluated at each update: the cost driver).
+    """
+    h = deltas.shape[0]
+    steps = nav_en.shape[0]
+    m_beams = offsets.shape[1]
+    p = np.empty((h, n, n))
+    mixed = np.empty((h, n, n))
+    buf = np.empty((n, n))
+    centres = np.empty((h, 2))
+    nodes = np.empty((n * n, 2))
+    ll = np.empty((h, n * n))
+    rot = np.empty((m_beams, 3))
+    mom = np.empty((h, 6))
+    s0 = 2.0 * half_side / (n - 1)
+    s = s0
+    pmf_init(p, centres, deltas, nav_en[0, 0], nav_en[0, 1], sig_heading0)
+    q_acc = 0.0
+    a_acc = 0.0
+    dh = deltas[1] - deltas[0] if h > 1 else 1.0
+    bad = 0
+    for k in range(steps):
+        if k > 0:
+            de = d0[k - 1, 0]
+            dn = d0[k - 1, 1]
+            for q in range(h):
+                c = math.cos(deltas[q])
+                sn = math.sin(deltas[q])
+                centres[q, 0] += c * de - sn * dn
+                centres[q, 1] += sn * de + c * dn
+            q_acc += sig_pos * sig_pos + (sig_cross * sig_cross) * (de * de + dn * dn)
+            if q_acc >= 0.25 * s * s:
+                for q in range(h):
+                    blur_separable(p[q], math.sqrt(q_acc) / s, buf)
+                q_acc = 0.0
+            if h > 1:
+                a_acc += 0.5 * (sig_heading_step / dh) ** 2
+                if a_acc >= 0.02:
+                    mix_headings(p, centres, s, min(a_acc, 0.25), buf, mixed)
+                    p[:, :, :] = mixed
+                    a_acc = 0.0
+        # likelihood, slice by slice; slices without mass are skipped
+        mx = -np.inf
+        best = np.inf
+        live = 0
+        for q in range(h):
+            if p[q].max() <= 0.0:
+                continue
+            live += 1
+            c = math.cos(deltas[q])
+            sn = math.sin(deltas[q])
+            for i in range(m_beams):
+                rot[i, 0] = c * offsets[k, i, 0] - sn * offsets[k, i, 1]
+                rot[i, 1] = sn * offsets[k, i, 0] + c * offsets[k, i, 1]
+                rot[i, 2] = offsets[k, i, 2]
+            grid_nodes(centres[q, 0], centres[q, 1], s, n, nodes)
+            b = loglik_loose(nodes, rot, nav_up[k], z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, ll[q])
+            if b < best:
+                best = b
+            flat = p[q].reshape(n * n)
+            for t in range(n * n):
+                if ll[q, t] > mx and flat[t] > 0.0:
+                    mx = ll[q, t]
+        total = 0.0
+        for q in range(h):
+            if p[q].max() <= 0.0:
+                continue
+            flat = p[q].reshape(n * n)
+            for t in range(n * n):
+                flat[t] *= math.exp(ll[q, t] - mx)
+                total += flat[t]
+        p /= total
+        live_out[k] = live
+        # estimate: mixture moments over slices
+        me = 0.0
+        mn = 0.0
+        myaw = 0.0
+        for q in range(h):
+            r = slice_moments(p[q], centres[q, 0], centres[q, 1], s)
+            for c6 in range(6):
+                mom[q, c6] = r[c6]
+            me += r[0] * r[1]
+            mn += r[0] * r[2]
+            myaw += r[0] * deltas[q]
+        ve = 0.0
+        vn = 0.0
+        vyaw = dh * dh / 12.0 if h > 1 else sig_heading0 * sig_heading0
+        for q in range(h):
+            ve += mom[q, 0] * (mom[q, 3] + (mom[q, 1] - me) ** 2)
+            vn += mom[q, 0] * (mom[q, 4] + (mom[q, 2] - mn) ** 2)
+            if h > 1:
+                vyaw += mom[q, 0] * (deltas[q] - myaw) ** 2
+        est[k, 0] = me
+        est[k, 1] = mn
+        est[k, 2] = nav_yaw[k] + myaw
+        var[k, 0] = ve + s * s / 12.0
+        var[k, 1] = vn + s * s / 12.0
+        var[k, 2] = vyaw
+        reinit_out[k] = 0
+        if best < np.inf:
+            bad = bad + 1 if best > div_sigma * div_sigma else 0
+        if bad >= div_steps:
+            s = s0
+            pmf_init(p, centres, deltas, me, mn, sig_heading0)
+            q_acc = 0.0
+            bad = 0
+            reinit_out[k] = 1
+            continue
+        # re-gridding: shared spacing follows the widest live slice, slices re-centre on their mean
+        sig_max = 0.0
+        for q in range(h):
+            if mom[q, 0] > 1e-3:
+                sig_max = max(sig_max, math.sqrt(max(mom[q, 3], mom[q, 4])))
+        s_t = max(s_min, 8.0 * sig_max / (n - 1))
+        new_s = s_t if (s_t < 0.5 * s or s_t > 2.0 * s) else s
+        for q in range(h):
+            if mom[q, 0] < DEAD_MASS:
+                p[q, :, :] = 0.0
+                centres[q, 0] = me
+                centres[q, 1] = mn
+                continue
+            off = max(abs(mom[q, 1] - centres[q, 0]), abs(mom[q, 2] - centres[q, 1]))
+            if new_s != s or off > 0.125 * n * s:
+                resample_grid(p[q], centres[q, 0], centres[q, 1], s, mom[q, 1], mom[q, 2], new_s, buf)
+                # keep the slice's mass (the density was sampled at a new spacing)
+                bm = buf.sum()
+                if bm > 0.0:
+                    p[q, :, :] = buf * (mom[q, 0] / bm)
+                centres[q, 0] = mom[q, 1]
+                centres[q, 1] = mom[q, 2]
+        s = new_s
+
+
+def run_pmf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, beams, ranges, zargs, rng=None, *,
+            cells=32, headings=15, heading_span_deg=60.0, initial_area_m=150.0,
+            initial_std_heading_deg=30.0, sig_pos=0.07, heading_drift_deg_sqrt_s=0.25,
+            sampling_time_s=1.0, min_spacing_m=0.5, sig_u=1.0, outside_sigma=5.0,
+            div_sigma=4.0, div_steps=10) -> dict:
+    """Point-mass filter on plain arrays (navigation solution at the K updates, beams (m, 3),
+    ranges (K, m), the navigation map's ``kernel_args()``). Deterministic: ``rng`` is unused.
+
+    ``headings`` = 1 is the position-only filter (heading prior as cross-track noise).
+    Returns per-update east, north, yaw estimates and their variances, reinitialisations
+    and the number of slices evaluated.
+    """
+    from tanbench.filters.beams import nav_frame_offsets
+
+    nav_en = np.ascontiguousarray(nav_en, dtype=float)
+    k_steps = nav_en.shape[0]
+    offsets = nav_frame_offsets(nav_pitch, nav_roll, nav_yaw, beams, ranges)
+    d0 = np.ascontiguousarray(np.diff(nav_en, axis=0))
+    sig0 = math.radians(initial_std_heading_deg)
+    if headings > 1:
+        # the bank spans the heading prior (2.5 sigma), at most heading_span_deg
+        span = min(math.radians(heading_span_deg), 2.5 * sig0) if sig0 > 0 else math.radians(heading_span_deg)
+        deltas = np.linspace(-span, span, headings)
+        sig_cross = (deltas[1] - deltas[0]) / math.sqrt(12.0)
+    else:
+        deltas = np.zeros(1)
+        sig_cross = sig0
+    est = np.empty((k_steps, 3))
+    var = np.empty((k_steps, 3))
+    reinit = np.zeros(k_steps, dtype=np.int64)
+    live = np.zeros(k_steps, dtype=np.int64)
+    pmf_loop(nav_en, np.ascontiguousarray(nav_up, dtype=float), np.ascontiguousarray(nav_yaw, dtype=float),
+             d0, offsets, *zargs, int(cells), deltas, sig0, initial_area_m / 2.0, sig_pos, sig_cross,
+             math.radians(heading_drift_deg_sqrt_s) * math.sqrt(sampling_time_s), min_spacing_m,
+             sig_u, outside_sigma, div_sigma, div_steps, est, var, reinit, live)
+    return {"est_e": est[:, 0], "est_n": est[:, 1], "est_yaw": est[:, 2],
+            "var_e": var[:, 0], "var_n": var[:, 1], "var_yaw": var[:, 2],
+            "reinit": reinit, "live_slices": live}
