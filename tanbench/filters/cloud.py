@@ -9,7 +9,6 @@ deviation. This kernel redraws the east and north columns that way.
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
 
 
 @nb.njit(cache=True)
