@@ -234,7 +234,8 @@ def test_collapse_initial_redraws_the_cloud(short_run, method):
 def test_gaussian_initial_cloud_in_a_run(short_run):
     """The first update's weighted spread is wider with a 150 m-std Gaussian cloud than the uniform square."""
     sc, v = short_run
-    flat = sc.filter.model_copy(update={"measurement_noise_altitude_m": 1e3})  # weights ~ uniform
+    flat = sc.filter.model_copy(update={"measurement_noise_altitude_m": 1e3,  # weights ~ uniform
+                                        "loose_architecture": "fix-only"})  # var_e is then the cloud's
     uni = run_method(sc.model_copy(update={"filter": flat}), "loose-dvl", v, filter_seed(0, 2))
     gau = run_method(sc.model_copy(update={"filter": flat.model_copy(update={"initial_cloud": "gaussian"})}),
                      "loose-dvl", v, filter_seed(0, 2))
