@@ -30,6 +30,12 @@ PROFILES: dict[str, dict[str, tuple[object, str]]] = {
         "filter.initial_cloud": ("uniform", "Section 4.3: uniform distribution over 150 m x 150 m"),
         "filter.distance_innovation": ("particle", "Eqs. 14-18 (the navigation reading contradicts Fig. 7)"),
         "filter.loose_heading_noise": (False, "Table 2's state noise only, for the loose TAN too"),
+        "filter.loose_architecture": ("fix-only", "Section 2's loose TAN as a position fix of the SINS (docs/model.md "
+                                                  "6.2; the KF-feedback reading is the recommended setting)"),
+        "filter.map_aware_likelihood": (False, "Eq. 20: the measurement covariance R alone, no map error term"),
+        "filter.likelihood": ("gaussian", "Eq. 20: a Gaussian likelihood"),
+        "filter.keep_on_map": (False, "the paper describes no bound on the estimate"),
+        "filter.divergence_spread_m": (None, "the paper describes no divergence test"),
     },
 }
 
