@@ -30,25 +30,25 @@ SEAFLOOR_2 = ROOT / "zhou2017-literal-seed2"
 SEE = "see results/zhou2017/REPORT.md (the anatomy) and docs/zhou2017-discussion.md"
 NOT_REPRODUCED = {
     "recommended": {
-        "1b": "the anatomy (area A, 6-run development sweep): switching the literal filter to Liu-West "
-              "regularisation takes tight-sbe from 120 to 4.5 m while tight-dvl goes 3.5 -> 2.8 m; all recommended "
-              "settings: tight-sbe 1.0 m. Regularised, one beam does as well as four (1.9 vs 2.9 m)",
-        "2a": "the MC mean of |heading error| over the last 60 s is 2.18 deg, just above the 2 deg bound "
-              "(the |MC mean signed error|, not counted, is 0.39 deg)",
-        "2b": "the MC mean |heading error| in area B is 1.90 deg (A: 2.18 deg): the synthetic flat region still "
-              "makes the heading observable",
-        "3b": "loose-dvl's error is its uncorrected 30 deg heading in both areas (147 m in B, 184 m in A)",
-        "4a-loose": "loose-dvl's error is its uncorrected heading (137-184 m), not the map",
-        "4b-tight": "tight-dvl is insensitive to noise up to +-2 m (2.9 -> 3.1 m, p = 0.04)",
-        "4b-loose": "loose-dvl's error is its uncorrected heading (169-219 m)",
-        "4c-tight": "the anatomy's propagation switch at T = 10 s takes the literal tight-sbe from 59 to 13 m "
-                    "[-67, -26]: exact 100 Hz increments make long sampling almost free (tight-sbe 1.9, 2.0, 2.0 m)",
-        "4c-loose": "the loose filter propagates with the navigation system's own increments in both profiles "
-                    "(anatomy: the propagation switch changes loose-dvl by 0.0 m); its error is the heading's",
-        "4d": "with exact propagation sampling time is the mildest factor (x2.4, x1.03, x1.02), not the steepest",
-        "5-tight": "regularisation (anatomy, 1000 particles: literal tight-sbe 299 -> 27 m with Liu-West): 2000 "
-                   "particles already converge; 1000 lose only a few tight-dvl runs (mean 39.6 m, p = 0.21)",
-        "5-loose": "loose-dvl's error is its uncorrected heading (175-188 m)",
+        # measured on the committed 50-run results (recommended settings: map-aware likelihood, closed-loop
+        # loose TAN); the 6-run anatomy of the literal profile is in docs/zhou2017-discussion.md
+        "1b": "regularised, one beam does as well as four: tight-sbe 1.8 m against tight-dvl 2.0 m (p = 1); the "
+              "anatomy's regularisation switch takes the literal tight-sbe from 120 to 4.5 m",
+        "1c": "the closed-loop loose TAN's median (1.6 m) beats tight-dvl's (2.0 m); its mean, 13.9 m, comes from "
+              "2 of 50 runs lost at the start (paired test p = 0.94)",
+        "2b": "the MC mean |heading error| in area B is 1.81 deg (A: 1.45 deg, p = 0.06): the synthetic flat "
+              "region still makes the heading observable",
+        "4b-tight": "tight-dvl is insensitive to noise up to +-2 m (2.0 -> 2.0 m, p = 0.21)",
+        "4b-loose": "loose-dvl 2 -> 3 m noise: 74 -> 116 m, p = 0.02, above the 1 % level",
+        "4c-tight": "exact 100 Hz increments make long sampling cheap for tight-dvl (2.0, 6.1, 5.1 m at 1, 5, "
+                    "10 s; 5 -> 10 s not worse); the anatomy's Euler switch at T = 10 s costs the literal tight-sbe "
+                    "59 -> 13 m",
+        "4c-loose": "loose-dvl 1 -> 5 s: 13.9 -> 65.6 m with p = 0.51 (lost runs at both)",
+        "4d": "the map resolution, not the sampling time, is the steepest factor for the tight filters "
+              "(x6.3 / x8.8 against x2.5 / x2.0)",
+        "5-tight": "2000 particles already converge (tight-dvl 2.0 -> 2.9 -> 3.5 m, p = 0.68, 0.61)",
+        "5-loose": "loose-dvl 13.9 -> 18.2 -> 24.9 m with 2000 and 1000 particles, p = 0.39 and 0.55",
+        "6b": "on the vehicle run the closed-loop loose TAN (3.2 m) ends better than tight-dvl (4.3 m)",
     },
     "literal": {
         "1a": "tight-dvl's mean is carried by runs lost for good (50 runs: mean 70.3 m, median 3.0 m, 6 runs "
