@@ -166,12 +166,12 @@ def _draw(sweep, cells, series, figdir: Path, plt) -> list[Path]:
         ax1.set_title(f"{title}\nheading, Monte Carlo mean", fontsize=10)
         written.append(_save(fig, figdir / f"{label}_heading.png", plt))
         if "pcrb_horizontal_m" in s.columns:
-            written.append(_bound_and_nees(s, methods, style, label, figdir, plt))
+            written.append(_bound_and_nees(s, methods, style, label, title, figdir, plt))
     written += _track_maps(cells, series, figdir, plt, by_group=not {c.cell_id for c in cells} <= defaults)
     return written
 
 
-def _bound_and_nees(s, methods, style, label, figdir, plt) -> Path:
+def _bound_and_nees(s, methods, style, label, title, figdir, plt) -> Path:
     """RMS error beside each method's PCRB, and the Monte Carlo mean NEES with its chi-square bounds."""
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
     for m in methods:
@@ -186,7 +186,7 @@ def _bound_and_nees(s, methods, style, label, figdir, plt) -> Path:
     ax2.fill_between(first["t"], first["nees_mc_low"], first["nees_mc_high"], color="gray", alpha=0.25,
                      label="95 % bounds (consistent filter)")
     ax1.set(yscale="log", ylabel="horizontal RMSE and PCRB (m)",
-            title=f"area {label}: RMS error over runs beside the posterior Cramér-Rao bound")
+            title=f"{title}\nRMS error over runs beside the posterior Cramér-Rao bound")
     ax2.set(yscale="log", ylabel="mean NEES", xlabel="time (s)", title="consistency: Monte Carlo mean NEES")
     ax1.legend(fontsize=7, ncol=2)
     ax2.legend(fontsize=7)

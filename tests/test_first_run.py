@@ -92,8 +92,9 @@ def test_plot_reaches_every_cell_and_titles_name_it(tmp_path, monkeypatch):
     for cell in sweep.cells:
         own = [name for name in titles if cell.cell_id in name]
         default = cell.cell_id == plot.representative_cells(sweep)[0].cell_id
-        figures = [f"A_{k}.png" for k in ("east", "north", "horizontal", "heading")] if default else own
-        assert len([f for f in figures if f.startswith("A_")]) == 4, titles
+        kinds = ("east", "north", "horizontal", "heading", "bound_nees")  # bound_nees: runs carry the PCRB
+        figures = [f"A_{k}.png" for k in kinds] if default else own
+        assert len([f for f in figures if f.startswith("A_")]) == len(kinds), titles
         for name in figures:
             assert f"cell {cell.cell_id}" in titles[name], (name, titles[name])
     tracks = [name for name in titles if name.startswith("tracks")]
