@@ -104,14 +104,15 @@ def correlations(cells: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot_prediction(cells: pd.DataFrame, path: Path) -> None:
-    from tanbench.plot import COLORS, _pyplot
+    from tanbench.plot import _pyplot, method_styles
 
     plt = _pyplot()
+    style = method_styles(sorted(set(cells["method"])))
     fig, axes = plt.subplots(1, len(PREDICTORS), figsize=(13, 4.2))
     markers = {"A": "o", "B": "s", "vehicle": "^", "custom": "D"}
     for ax, p in zip(axes, PREDICTORS):
         for (method, area), g in cells.groupby(["method", "area"]):
-            ax.scatter(g[p], g["mean_time_avg_error_m"], color=COLORS.get(method, "gray"),
+            ax.scatter(g[p], g["mean_time_avg_error_m"], color=style[method][1],
                        marker=markers.get(area, "x"), s=28, alpha=0.8, label=f"{method}, {area}")
         ax.set(xscale="log", yscale="log", xlabel=p, ylabel="mean time-averaged error (m)")
         ax.grid(alpha=0.3, which="both")
