@@ -67,7 +67,7 @@ predict: $(VENV)/.installed-run
 ## accuracy-cost figure results/methods/figures/accuracy_cost.png). RUNS=n overrides the sweep's 20.
 methods: $(VENV)/.installed-run
 	rm -rf results/methods
-	$(TB) run configs/methods.yaml --out results/methods --quiet --workers 2 $(if $(RUNS),--runs $(RUNS))
+	$(TB) run configs/methods.yaml --out results/methods --quiet --workers 2 --series none $(if $(RUNS),--runs $(RUNS))
 	$(TB) plot results/methods --frontier
 
 ## report: redraw results/zhou2017's figures and rewrite its REPORT.md from the stored runs
