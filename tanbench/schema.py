@@ -20,9 +20,10 @@ METRIC_COLUMNS = (
     "final_horizontal_error_m", "mean_horizontal_error_m", "rmse_after_convergence_m",
     "final_heading_error_deg", "convergence_time_s", "diverged", "reinitialisations",
     "final_east_error_m", "final_north_error_m", "filter_wall_s",
+    # divergence recovery and the loose TAN's fixes (scoring.recovery_stats)
+    "recoveries", "first_reinit_s", "mean_recovery_s", "left_map", "fixes_accepted", "fixes_rejected",
     # consistency (metrics.consistency) and efficiency against the bound (bounds.pcrb): metrics.run_metrics
     "nees_mean_after_convergence", "nees_above_95", "nees_below_95", "pcrb_after_convergence_m", "rmse_pcrb_ratio",
-    "recoveries", "first_reinit_s", "mean_recovery_s", "left_map", "fixes_accepted", "fixes_rejected",
 )
 
 # the per-update series stored for every run (float32): the scored ones every method has

@@ -22,7 +22,9 @@ name: overconfidence
 seed: 15150
 runs: 8
 methods: [tight-dvl]
-scenario: {particles: 2000, duration_s: 300}
+# the plain likelihood, where filter.measurement_noise_altitude_m is the whole beam variance (the
+# recommended map-aware one adds the map's representation and node errors to it)
+scenario: {particles: 2000, duration_s: 300, filter: {map_aware_likelihood: false, likelihood: gaussian}}
 tables:
   noise_model: {filter.measurement_noise_altitude_m: [1.0, 0.05]}
 """

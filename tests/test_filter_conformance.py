@@ -270,7 +270,7 @@ NOISE_FREE_WORSE = ("issue 12: with the recommended map-aware Student-t likeliho
 
 
 @pytest.mark.parametrize("settings, method", [("paper", m) for m in METHODS] + [
-    ("recommended", m) if m == "tight-dvl" else
+    ("recommended", m) if m not in ("tight-sbe", "loose-dvl") else
     pytest.param("recommended", m, marks=pytest.mark.xfail(strict=True, reason=NOISE_FREE_WORSE))
     for m in METHODS])
 def test_zero_range_noise_no_worse(settings, method):
@@ -320,10 +320,7 @@ def test_flat_seafloor_leaves_position_unobservable(plane_world, method):
             np.testing.assert_array_equal(s["est_n"], s["nav_n"])
 
 
-@pytest.mark.parametrize("method", [pytest.param(m, marks=pytest.mark.xfail(
-    strict=True, reason="loose-dvl reports its particle cloud's variance, not that of its output (the "
-                        "navigation solution until a fix): 222 m of error under a 64 m sigma on a plane"))
-    if m == "loose-dvl" else m for m in METHODS])
+@pytest.mark.parametrize("method", METHODS)
 def test_flat_seafloor_error_follows_navigation_and_no_fix_is_claimed(plane_world, method):
     """Where TAN has no information (a plane), every method's error follows the navigation system's
     and its reported covariance admits it: at every update the estimate lies within 3 reported

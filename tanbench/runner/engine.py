@@ -334,8 +334,9 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
             store.remove_cells(out, stale)
     plan = make_plan(sweep, out, workers, series, force=force)
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
-    store.write_text(sweep.text, out / "sweep.yaml")
     todo = plan.todo
+    if not todo:  # with tasks to run, sweep.yaml is written once the executor is up (a scheduler that
+        store.write_text(sweep.text, out / "sweep.yaml")  # does not answer changes nothing stored)
     report = RunReport(skipped=len(plan.tasks) - len(todo))
     started = time.perf_counter()
     if todo:
@@ -413,6 +414,7 @@ def _execute(plan: Plan, todo: list[Task], scheduler, meta, full_series, progres
     # the executor first: if it cannot start (a Dask address that does not answer), the
     # user sees its one error line and no half-drawn progress bar
     with open_executor(workers, scheduler, truth_maps, worlds, todo[0].scenario_json) as handle:
+        store.write_text(plan.sweep.text, plan.out / "sweep.yaml")
         bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
                    dynamic_ncols=True, smoothing=0.05, desc=f"{plan.sweep.name} on {handle.description}")
         pending = {}
