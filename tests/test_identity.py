@@ -65,7 +65,7 @@ def test_committed_runs_tabulate_to_the_committed_tables(directory):
 
     tables = sweep_tables(results.load(directory), load_sweep(directory / "sweep.yaml"))
     committed = sorted((directory / "tables").glob("*.md"))
-    assert [p.stem for p in committed] == sorted(tables)
+    assert sorted(p.stem for p in committed) == sorted(tables)
     for md in committed:
         assert to_markdown(tables[md.stem], title=md.stem).strip() == md.read_text().strip(), md.name
 
