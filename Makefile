@@ -3,8 +3,10 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
+# the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
+PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
 
-.PHONY: run test bench paper paper-literal anatomy report baseline predict methods ablations monterey realism check-fast scaling clean
+.PHONY: run test bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism check-fast scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -38,22 +40,25 @@ paper: $(VENV)/.installed-run
 	rm -rf results/zhou2017
 	$(TB) run configs/zhou2017.yaml --out results/zhou2017 --quiet
 	$(TB) plot results/zhou2017
-	$(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
+	$(PAPER_REPORT)
 
-## paper-literal: the whole study as the paper's text describes it (profile zhou2017-literal) into results/zhou2017-literal (runs, tables, figures, REPORT.md); then refreshes results/zhou2017/REPORT.md if present
+## paper-literal: the whole study as the paper's text describes it (profile zhou2017-literal) into results/zhou2017-literal (runs, tables, figures, REPORT.md)
+## and the literal profile on another seafloor (results/zhou2017-literal-seed2); then refreshes results/zhou2017/REPORT.md if present.
+## Resumes: stored runs are reused only where their identity (cell key, seeds, map hash) matches; rm -rf the directories to recompute.
 paper-literal: $(VENV)/.installed-run
-	$(TB) run configs/zhou2017-literal.yaml --out results/zhou2017-literal --force --quiet
+	$(TB) run configs/zhou2017-literal.yaml --out results/zhou2017-literal --quiet
 	$(TB) tables results/zhou2017-literal --compare-paper > results/zhou2017-literal/tables.md
 	$(TB) plot results/zhou2017-literal
 	$(TB) report results/zhou2017-literal --discussion none
-	$(TB) run configs/zhou2017-literal-seed2.yaml --out results/zhou2017-literal-seed2 --force --quiet
-	$(if $(wildcard results/zhou2017/sweep.yaml),$(TB) report results/zhou2017 --literal results/zhou2017-literal $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy))
+	$(TB) run configs/zhou2017-literal-seed2.yaml --out results/zhou2017-literal-seed2 --quiet
+	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
 
-## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy, its table in results/zhou2017-anatomy/ANATOMY.md
+## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy
+## (final errors only, no series), its table in results/zhou2017-anatomy/ANATOMY.md. Resumes like paper-literal.
 anatomy: $(VENV)/.installed-run
-	$(TB) run configs/zhou2017-anatomy.yaml --out results/zhou2017-anatomy --force --quiet
+	$(TB) run configs/zhou2017-anatomy.yaml --out results/zhou2017-anatomy --series none --quiet
 	$(TB) anatomy results/zhou2017-anatomy > results/zhou2017-anatomy/ANATOMY.md
-	$(if $(wildcard results/zhou2017/sweep.yaml),$(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) --anatomy results/zhou2017-anatomy)
+	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
 
 ## predict: terrain suitability maps (results/suitability) and prediction vs outcome over the committed
 ## sweeps (results/prediction: Spearman correlations of suitability and PCRB with the errors, scatter figure)
@@ -73,7 +78,11 @@ methods: $(VENV)/.installed-run
 ## report: redraw results/zhou2017's figures and rewrite its REPORT.md from the stored runs
 report: $(VENV)/.installed-run
 	$(TB) plot results/zhou2017
-	$(TB) report results/zhou2017
+	$(PAPER_REPORT)
+
+## paper-report: rewrite results/zhou2017/REPORT.md only (with the literal profile and anatomy if present)
+paper-report: $(VENV)/.installed-run
+	$(PAPER_REPORT)
 
 ## ablations: area A defaults with one of tanbench's modelling or filter choices switched at a time
 ablations: $(VENV)/.installed-run

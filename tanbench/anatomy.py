@@ -10,6 +10,10 @@ and the mean difference (switched minus baseline) with a 95 % t interval:
   filter switch, so each run's difference removes the run-to-run variation of the
   vehicle data);
 * unpaired (Welch) where the switch changes the world (the terrain).
+
+Beside the statistic (fixed in docs/model.md section 10.1), each row counts the runs
+that ended lost (the run's ``diverged`` flag: final error above the sweep's divergence
+threshold) in both cells, since a few lost runs carry most means here.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ BASELINE = "literal"
 SEPARATOR = "__"
 LEVEL = 0.95
 ANATOMY_COLUMNS = ("cell", "switch", "method", "n", "baseline_mean_m", "switched_mean_m", "diff_mean_m",
-                   "ci_low_m", "ci_high_m", "paired")
+                   "ci_low_m", "ci_high_m", "paired", "baseline_lost", "switched_lost")
 
 
 def difference_interval(switched: pd.Series, baseline: pd.Series, paired: bool, level: float = LEVEL):
@@ -65,15 +69,18 @@ def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_err
         base, other = cell_of[base_table], cell_of[table]
         paired = base.scenario.world_key() == other.scenario.world_key()
         for method in sweep.spec.methods:
-            def values(cell):
-                sel = ok[(ok["cell_id"] == cell.cell_id) & (ok["method"] == method)]
-                return sel.set_index("run")[column].sort_index()
+            def rows_of(cell):
+                return ok[(ok["cell_id"] == cell.cell_id) & (ok["method"] == method)].set_index("run").sort_index()
 
-            b, s = values(base), values(other)
+            def lost(sel):
+                return int(sel["diverged"].astype(bool).sum()) if "diverged" in sel else -1
+
+            rb, rs = rows_of(base), rows_of(other)
+            b, s = rb[column], rs[column]
             n, diff, lo, hi = difference_interval(s, b, paired)
             rows.append(dict(cell=name, switch=switch, method=method, n=n, baseline_mean_m=float(b.mean()),
                              switched_mean_m=float(s.mean()), diff_mean_m=diff, ci_low_m=lo, ci_high_m=hi,
-                             paired=paired))
+                             paired=paired, baseline_lost=lost(rb), switched_lost=lost(rs)))
     return pd.DataFrame(rows, columns=list(ANATOMY_COLUMNS))
 
 
@@ -83,7 +90,7 @@ def anatomy_markdown(table: pd.DataFrame) -> str:
     for cell, part in table.groupby("cell", sort=False):
         methods = list(dict.fromkeys(part["method"]))
         out += [f"**{cell}**", "",
-                "| switch to recommended | " + " | ".join(f"{m}: literal -> switched, diff [95 % CI] (m)"
+                "| switch to recommended | " + " | ".join(f"{m}: literal -> switched, diff [95 % CI] (m); lost runs"
                                                          for m in methods) + " |",
                 "|---|" + "---|" * len(methods)]
         for switch, rows in part.groupby("switch", sort=False):
@@ -91,8 +98,9 @@ def anatomy_markdown(table: pd.DataFrame) -> str:
             for m in methods:
                 r = rows[rows["method"] == m].iloc[0]
                 ci = "" if np.isnan(r["ci_low_m"]) else f" [{r['ci_low_m']:+.1f}, {r['ci_high_m']:+.1f}]"
+                lost = "" if r["baseline_lost"] < 0 else f"; {r['baseline_lost']} -> {r['switched_lost']}"
                 cells.append(f"{r['baseline_mean_m']:.1f} -> {r['switched_mean_m']:.1f}, "
-                             f"{r['diff_mean_m']:+.1f}{ci}{'' if r['paired'] else ' (unpaired)'}")
+                             f"{r['diff_mean_m']:+.1f}{ci}{'' if r['paired'] else ' (unpaired)'}{lost}")
             out.append(f"| {switch} | " + " | ".join(cells) + " |")
         out.append("")
     return "\n".join(out)

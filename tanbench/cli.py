@@ -455,13 +455,16 @@ def report(
                                            help="Results of configs/zhou2017-literal.yaml, shown side by side."),
     anatomy: Optional[Path] = typer.Option(None, "--anatomy",
                                            help="Results of configs/zhou2017-anatomy.yaml (the anatomy table)."),
+    other_seafloor: Optional[Path] = typer.Option(
+        None, "--other-seafloor", help="Results of configs/zhou2017-literal-seed2.yaml (the literal profile on "
+                                       "another seafloor: its fixed check)."),
 ):
     from tanbench.report import write_report
 
-    for label, d in (("--literal", literal), ("--anatomy", anatomy)):
+    for label, d in (("--literal", literal), ("--anatomy", anatomy), ("--other-seafloor", other_seafloor)):
         if d is not None and not (d / "sweep.yaml").exists():
             raise TanbenchError(f"{label} {d}: not a tanbench results directory (no sweep.yaml)")
-    path = write_report(directory, discussion, literal=literal, anatomy=anatomy)
+    path = write_report(directory, discussion, literal=literal, anatomy=anatomy, other_seafloor=other_seafloor)
     typer.echo(f"wrote {path}")
 
 

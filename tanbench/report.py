@@ -160,10 +160,11 @@ def _claims_block(label: str, claims) -> list[str]:
 
 
 def write_report(directory, discussion: Path | None = None, literal: Path | None = None,
-                 anatomy: Path | None = None) -> Path:
+                 anatomy: Path | None = None, other_seafloor: Path | None = None) -> Path:
     """Write ``DIR/REPORT.md``; returns its path. ``literal``: results of the literal profile,
-    shown beside (claims and tables); ``anatomy``: results of the anatomy sweep (its table)."""
-    from tanbench.claims import evaluate
+    shown beside (claims and tables); ``anatomy``: results of the anatomy sweep (its table);
+    ``other_seafloor``: the literal profile on another seafloor (its fixed check)."""
+    from tanbench.claims import evaluate, other_seafloor as other_seafloor_claim
     from tanbench.paper import compare_with_paper
     from tanbench.results import load, load_series, sweep_tables
     from tanbench import store
@@ -220,6 +221,9 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
         parts += ["", f"Literal profile: {sum(c.reproduced for c in lit_claims)} of {len(lit_claims)}; "
                       f"recommended profile: {sum(c.reproduced for c in claims)} of {len(claims)}.", ""]
         parts += _claims_block("Literal profile (the paper as written)", lit_claims)
+        if other_seafloor is not None:
+            parts += _claims_block(f"Literal profile on another seafloor (`{other_seafloor}`)",
+                                   [other_seafloor_claim(load(other_seafloor))])
         parts += _claims_block("Recommended profile (tanbench's defaults)", claims)
         parts.append(USAGE)
     else:

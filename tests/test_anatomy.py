@@ -29,7 +29,7 @@ def fake_runs(sweep, values):
         for method in sweep.spec.methods:
             for run, v in enumerate(values[(table, method)]):
                 rows.append(dict(cell_id=cell.cell_id, method=method, run=run, status="ok",
-                                 final_horizontal_error_m=v))
+                                 final_horizontal_error_m=v, diverged=v > 75))
     return pd.DataFrame(rows)
 
 
@@ -50,7 +50,7 @@ def test_anatomy_table_rows():
     sweep = parse_sweep(SWEEP)
     vals = {("t3__literal", "tight-dvl"): [10, 20, 30, 40], ("t3__literal", "loose-dvl"): [100, 100, 100, 100],
             ("t3__propagation", "tight-dvl"): [5, 12, 26, 33], ("t3__propagation", "loose-dvl"): [100, 101, 99, 100],
-            ("t3__terrain", "tight-dvl"): [50, 60, 70, 80], ("t3__terrain", "loose-dvl"): [90, 95, 100, 105]}
+            ("t3__terrain", "tight-dvl"): [50, 60, 70, 80], ("t3__terrain", "loose-dvl"): [60, 70, 100, 105]}
     table = anatomy_table(fake_runs(sweep, vals), sweep)
     assert list(table["switch"].unique()) == ["propagation", "terrain"]
     r = table[(table["switch"] == "propagation") & (table["method"] == "tight-dvl")].iloc[0]
@@ -61,3 +61,6 @@ def test_anatomy_table_rows():
     assert not t["paired"] and t["diff_mean_m"] == pytest.approx(40.0)
     md = anatomy_markdown(table)
     assert "**t3**" in md and "25.0 -> 19.0, -6.0 [" in md and "(unpaired)" in md
+    lo = table[(table["switch"] == "terrain") & (table["method"] == "loose-dvl")].iloc[0]
+    assert (lo["baseline_lost"], lo["switched_lost"]) == (4, 2)  # 100 x 4 lost; 60, 70, 100, 105: 2 above 75 m
+    assert r["baseline_lost"] == 0 and "; 0 -> 0 |" in md
