@@ -42,13 +42,13 @@ paper: $(VENV)/.installed-run
 	$(TB) plot results/zhou2017
 	$(PAPER_REPORT)
 
-## paper-literal: the whole study as the paper's text describes it (profile zhou2017-literal) into results/zhou2017-literal (runs, tables, figures, REPORT.md)
+## paper-literal: the whole study as the paper's text describes it (profile zhou2017-literal) into results/zhou2017-literal (runs, tables, REPORT.md;
+## `tanbench plot results/zhou2017-literal` draws its figures, not committed to keep results/ small)
 ## and the literal profile on another seafloor (results/zhou2017-literal-seed2); then refreshes results/zhou2017/REPORT.md if present.
 ## Resumes: stored runs are reused only where their identity (cell key, seeds, map hash) matches; rm -rf the directories to recompute.
 paper-literal: $(VENV)/.installed-run
 	$(TB) run configs/zhou2017-literal.yaml --out results/zhou2017-literal --quiet
 	$(TB) tables results/zhou2017-literal --compare-paper > results/zhou2017-literal/tables.md
-	$(TB) plot results/zhou2017-literal
 	$(TB) report results/zhou2017-literal --discussion none
 	$(TB) run configs/zhou2017-literal-seed2.yaml --out results/zhou2017-literal-seed2 --quiet
 	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi

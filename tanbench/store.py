@@ -84,11 +84,28 @@ def write_parquet(df: pd.DataFrame, path: Path, meta: dict) -> None:
 
 
 def write_table(table: pa.Table, path: Path, meta: dict) -> None:
-    """Write an Arrow ``table`` to ``path`` atomically with ``meta`` in the schema metadata."""
-    merged = dict(table.schema.metadata or {})
-    merged[META_KEY] = json.dumps(meta).encode()
-    table = table.replace_schema_metadata(merged)
-    _write_atomically(path, lambda fh: pq.write_table(table, fh, compression="zstd"))
+    """Write an Arrow ``table`` to ``path`` atomically with ``meta`` in the file's key-value metadata.
+
+    The footer holds tanbench's metadata once: no pandas metadata (our frames have no index
+    or pandas-only types), no serialised Arrow schema (which would repeat the metadata;
+    our columns are plain numbers, booleans and strings, which Parquet's own types bring
+    back exactly) and no column statistics (results are read whole). A 60-row cell's file
+    is then about a third of its former size, most of which was footer.
+    """
+    table = table.replace_schema_metadata(None)
+
+    def write(fh):
+        with pq.ParquetWriter(fh, table.schema, compression="zstd", write_statistics=False,
+                              store_schema=False) as writer:
+            writer.write_table(table)
+            writer.add_key_value_metadata({META_KEY: json.dumps(meta).encode()})
+
+    _write_atomically(path, write)
+
+
+def is_compact_format(path: Path) -> bool:
+    """True if ``path`` was written by :func:`write_table` as it is now (footer with our metadata only)."""
+    return set(pq.read_metadata(path).metadata or {}) == {META_KEY}
 
 
 def write_text(text: str, path: Path) -> None:
@@ -184,17 +201,18 @@ def compact_cells(out: Path, cell_ids) -> None:
     the cell's rows are gathered into one file (a results directory of 550 tasks then
     holds 11 files instead of 550, small enough to commit). The merged file is written
     atomically before the task files are deleted; if a kill falls in between, the rows
-    exist twice and :func:`tanbench.results.load` keeps one copy.
+    exist twice and :func:`tanbench.results.load` keeps one copy. A merged file in an
+    older footer format (:func:`is_compact_format`) is rewritten, rows unchanged.
     """
     for cell_id in cell_ids:
         directory = cell_dir(out / "runs", cell_id)
         parts = sorted(directory.glob("run-*.parquet"))
-        if not parts:
-            continue
         merged_path = directory / "runs.parquet"
+        if not parts and (not merged_path.exists() or is_compact_format(merged_path)):
+            continue
         sources = ([merged_path] if merged_path.exists() else []) + parts
         tables = [pq.read_table(p) for p in sources]
-        meta = read_meta(parts[-1])
+        meta = read_meta(sources[-1])
         table = pa.concat_tables([t.replace_schema_metadata(None) for t in tables], promote_options="default")
         df = table.to_pandas().drop_duplicates(subset=["method", "run"], keep="last")
         df = df.sort_values(["run", "method"], kind="stable").reset_index(drop=True)
