@@ -25,8 +25,76 @@ from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import sin_cos_about
 from tanbench.options import LIKELIHOOD
-from tanbench.terrain.grid import bilinear, bilinear_numpy
+from tanbench.terrain.grid import bilinear, bilinear_numpy, bilinear_pair
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
+
+
+@nb.njit(cache=True, inline="always")
+def beam_constants(sig_u, sig_d, outside_sigma):
+    """(sig_u^2, 1 / sig_u^2, 1 / sig_d^2, (outside_sigma sig_u)^2, outside_sigma^2): the
+    per-update constants of the likelihood kernels.
+
+    This and the ``*_particle`` functions below are inlined into their callers and take the
+    callers' floating-point flags: call them from ``fastmath=FASTMATH`` kernels only (the
+    array kernels here and the filter loops' fused passes), so that the fused passes
+    compute exactly what the array kernels compute."""
+    su2 = sig_u * sig_u
+    return su2, 1.0 / su2, 1.0 / (sig_d * sig_d), (outside_sigma * sig_u) ** 2, outside_sigma * outside_sigma
+
+
+@nb.njit(cache=True, inline="always")
+def attitude_reference(ref_pitch, ref_roll, ref_yaw):
+    """The navigation attitude and its sines and cosines, as the per-particle kernels take it."""
+    return (ref_pitch, math.sin(ref_pitch), math.cos(ref_pitch), ref_roll, math.sin(ref_roll), math.cos(ref_roll),
+            ref_yaw, math.sin(ref_yaw), math.cos(ref_yaw))
+
+
+@nb.njit(cache=True, inline="always")
+def _particle_dcm(x, j, att):
+    """C_b^n of particle ``j``'s attitude, each angle as the reference ``att`` plus an offset."""
+    ref_pitch, s_pitch, c_pitch, ref_roll, s_roll, c_roll, ref_yaw, s_yaw, c_yaw = att
+    st, ct = sin_cos_about(s_pitch, c_pitch, x[j, PITCH] - ref_pitch)
+    sg, cg = sin_cos_about(s_roll, c_roll, x[j, ROLL] - ref_roll)
+    sp, cp = sin_cos_about(s_yaw, c_yaw, x[j, YAW] - ref_yaw)
+    return (cg * cp - st * sg * sp, -ct * sp, sg * cp + st * cg * sp,
+            cg * sp + st * sg * cp, ct * cp, sg * sp - st * cg * cp,
+            -ct * sg, st, ct * cg)
+
+
+@nb.njit(cache=True)
+def beams_used(ranges):
+    """Number of beams with a range (not NaN)."""
+    used = 0
+    for i in range(ranges.shape[0]):
+        if ranges[i] == ranges[i]:
+            used += 1
+    return used
+
+
+@nb.njit(cache=True, inline="always")
+def loglik_tight_particle(x, j, beams, ranges, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
+                          dist_e, dist_n, inv_d2):
+    """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_tight` (and the fused filter
+    loop): ``att`` from :func:`attitude_reference`, ``dist_*`` its distance innovations."""
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _particle_dcm(x, j, att)
+    sq = 0.0
+    for i in range(beams.shape[0]):
+        r = ranges[i]
+        if r != r:
+            continue
+        a0 = beams[i, 0] * r
+        a1 = beams[i, 1] * r
+        a2 = beams[i, 2] * r
+        pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
+        pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
+        pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
+        h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
+        if h == h:
+            sq += (pu - h) * (pu - h)
+        else:
+            sq += outside_sq
+    chi = sq * inv_u2
+    return -0.5 * (chi + (dist_e ** 2 + dist_n ** 2) * inv_d2), chi
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
@@ -37,51 +105,16 @@ def loglik_tight(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outside_sig
     ``ref_*`` (the navigation attitude) only speed up the trigonometry: each particle's
     angles are evaluated as reference plus a usually small offset (``trig.sin_cos_about``).
     """
-    m = beams.shape[0]
-    used = 0
-    for i in range(m):
-        if ranges[i] == ranges[i]:
-            used += 1
-    inv_u2 = 1.0 / (sig_u * sig_u)
-    inv_d2 = 1.0 / (sig_d * sig_d)
-    outside_sq = (outside_sigma * sig_u) ** 2
+    used = beams_used(ranges)
+    _, inv_u2, inv_d2, outside_sq, _ = beam_constants(sig_u, sig_d, outside_sigma)
+    att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
     best = np.inf
-    s_pitch, c_pitch = math.sin(ref_pitch), math.cos(ref_pitch)
-    s_roll, c_roll = math.sin(ref_roll), math.cos(ref_roll)
-    s_yaw, c_yaw = math.sin(ref_yaw), math.cos(ref_yaw)
     for j in range(x.shape[0]):
-        st, ct = sin_cos_about(s_pitch, c_pitch, x[j, PITCH] - ref_pitch)
-        sg, cg = sin_cos_about(s_roll, c_roll, x[j, ROLL] - ref_roll)
-        sp, cp = sin_cos_about(s_yaw, c_yaw, x[j, YAW] - ref_yaw)
-        c00 = cg * cp - st * sg * sp
-        c01 = -ct * sp
-        c02 = sg * cp + st * cg * sp
-        c10 = cg * sp + st * sg * cp
-        c11 = ct * cp
-        c12 = sg * sp - st * cg * cp
-        c20 = -ct * sg
-        c21 = st
-        c22 = ct * cg
-        sq = 0.0
-        for i in range(m):
-            r = ranges[i]
-            if r != r:
-                continue
-            a0 = beams[i, 0] * r
-            a1 = beams[i, 1] * r
-            a2 = beams[i, 2] * r
-            pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
-            pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
-            pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
-            h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
-            if h == h:
-                sq += (pu - h) * (pu - h)
-            else:
-                sq += outside_sq
-        chi = sq * inv_u2
+        ll, chi = loglik_tight_particle(x, j, beams, ranges, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
+                                        dist_innov[j, 0], dist_innov[j, 1], inv_d2)
         if used > 0 and chi / used < best:
             best = chi / used
-        out[j] = -0.5 * (chi + (dist_innov[j, 0] ** 2 + dist_innov[j, 1] ** 2) * inv_d2)
+        out[j] = ll
     return best
 
 
@@ -99,35 +132,47 @@ def loglik_tight_numpy(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outsi
     return loglik, best
 
 
+@nb.njit(cache=True)
+def offsets_used(offsets):
+    """Number of beam offsets (m, 3) with a range (third column not NaN)."""
+    used = 0
+    for i in range(offsets.shape[0]):
+        if offsets[i, 2] == offsets[i, 2]:
+            used += 1
+    return used
+
+
+@nb.njit(cache=True, inline="always")
+def loglik_loose_particle(x, j, offsets, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq):
+    """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_loose`."""
+    sq = 0.0
+    for i in range(offsets.shape[0]):
+        if offsets[i, 2] != offsets[i, 2]:
+            continue
+        h = bilinear(z, e0, n0, inv_re, inv_rn, x[j, 0] + offsets[i, 0], x[j, 1] + offsets[i, 1])
+        if h == h:
+            d = up + offsets[i, 2] - h
+            sq += d * d
+        else:
+            sq += outside_sq
+    chi = sq * inv_u2
+    return -0.5 * chi, chi
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def loglik_loose(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, out):
     """Loose filter: beams projected once with the navigation attitude, ``offsets`` (m, 3) in m.
 
     Rows of ``offsets`` with NaN are beams without a range and are skipped.
     """
-    m = offsets.shape[0]
-    used = 0
-    for i in range(m):
-        if offsets[i, 2] == offsets[i, 2]:
-            used += 1
-    inv_u2 = 1.0 / (sig_u * sig_u)
-    outside_sq = (outside_sigma * sig_u) ** 2
+    used = offsets_used(offsets)
+    _, inv_u2, _, outside_sq, _ = beam_constants(sig_u, 1.0, outside_sigma)
     best = np.inf
     for j in range(x.shape[0]):
-        sq = 0.0
-        for i in range(m):
-            if offsets[i, 2] != offsets[i, 2]:
-                continue
-            h = bilinear(z, e0, n0, inv_re, inv_rn, x[j, 0] + offsets[i, 0], x[j, 1] + offsets[i, 1])
-            if h == h:
-                d = up + offsets[i, 2] - h
-                sq += d * d
-            else:
-                sq += outside_sq
-        chi = sq * inv_u2
+        ll, chi = loglik_loose_particle(x, j, offsets, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
         if used > 0 and chi / used < best:
             best = chi / used
-        out[j] = -0.5 * chi
+        out[j] = ll
     return best
 
 
@@ -177,62 +222,52 @@ def _beam_logpdf_numpy(d2, v, sig_u, kind, nu):
     return -0.5 * d2 / v + norm
 
 
+@nb.njit(cache=True, inline="always")
+def loglik_tight_mapaware_particle(x, j, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, att,
+                                   kind, nu, dist_e, dist_n, inv_d2):
+    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_tight_mapaware`."""
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _particle_dcm(x, j, att)
+    ll = 0.0
+    chi = 0.0
+    for i in range(beams.shape[0]):
+        r = ranges[i]
+        if r != r:
+            continue
+        a0 = beams[i, 0] * r
+        a1 = beams[i, 1] * r
+        a2 = beams[i, 2] * r
+        pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
+        pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
+        pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
+        h, mv = bilinear_pair(z, mvar, e0, n0, inv_re, inv_rn, pe, pn)
+        if h == h and mv == mv:
+            v = su2 + mv
+            d2 = (pu - h) * (pu - h)
+            ll += _beam_logpdf(d2, v, inv_u2, kind, nu)
+            chi += d2 / v
+        else:
+            ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
+            chi += out2
+    return ll - 0.5 * (dist_e ** 2 + dist_n ** 2) * inv_d2, chi
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def loglik_tight_mapaware(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
                           dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out):
     """:func:`loglik_tight` with per-beam variance ``sig_u^2 + mvar`` at the footprint and a
-    Gaussian or Student-t beam density; returns the best mean d^2 / v per beam."""
-    m = beams.shape[0]
-    used = 0
-    for i in range(m):
-        if ranges[i] == ranges[i]:
-            used += 1
-    su2 = sig_u * sig_u
-    inv_u2 = 1.0 / su2
-    inv_d2 = 1.0 / (sig_d * sig_d)
-    out2 = outside_sigma * outside_sigma
+    Gaussian or Student-t beam density; returns the best mean d^2 / v per beam.
+
+    ``mvar`` has the shape and nodes of ``z`` (one cell look-up serves both)."""
+    used = beams_used(ranges)
+    su2, inv_u2, inv_d2, _, out2 = beam_constants(sig_u, sig_d, outside_sigma)
+    att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
     best = np.inf
-    s_pitch, c_pitch = math.sin(ref_pitch), math.cos(ref_pitch)
-    s_roll, c_roll = math.sin(ref_roll), math.cos(ref_roll)
-    s_yaw, c_yaw = math.sin(ref_yaw), math.cos(ref_yaw)
     for j in range(x.shape[0]):
-        st, ct = sin_cos_about(s_pitch, c_pitch, x[j, PITCH] - ref_pitch)
-        sg, cg = sin_cos_about(s_roll, c_roll, x[j, ROLL] - ref_roll)
-        sp, cp = sin_cos_about(s_yaw, c_yaw, x[j, YAW] - ref_yaw)
-        c00 = cg * cp - st * sg * sp
-        c01 = -ct * sp
-        c02 = sg * cp + st * cg * sp
-        c10 = cg * sp + st * sg * cp
-        c11 = ct * cp
-        c12 = sg * sp - st * cg * cp
-        c20 = -ct * sg
-        c21 = st
-        c22 = ct * cg
-        ll = 0.0
-        chi = 0.0
-        for i in range(m):
-            r = ranges[i]
-            if r != r:
-                continue
-            a0 = beams[i, 0] * r
-            a1 = beams[i, 1] * r
-            a2 = beams[i, 2] * r
-            pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
-            pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
-            pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
-            h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
-            mv = bilinear(mvar, e0, n0, inv_re, inv_rn, pe, pn)
-            if h == h and mv == mv:
-                v = su2 + mv
-                d2 = (pu - h) * (pu - h)
-                ll += _beam_logpdf(d2, v, inv_u2, kind, nu)
-                chi += d2 / v
-            else:
-                ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
-                chi += out2
+        ll, chi = loglik_tight_mapaware_particle(x, j, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2,
+                                                 out2, att, kind, nu, dist_innov[j, 0], dist_innov[j, 1], inv_d2)
         if used > 0 and chi / used < best:
             best = chi / used
-        out[j] = ll - 0.5 * (dist_innov[j, 0] ** 2 + dist_innov[j, 1] ** 2) * inv_d2
+        out[j] = ll
     return best
 
 
@@ -259,36 +294,38 @@ def _mapaware_terms(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_
     return ll - 0.5 * dist_chi, best
 
 
+@nb.njit(cache=True, inline="always")
+def loglik_loose_mapaware_particle(x, j, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, kind, nu):
+    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_loose_mapaware`."""
+    ll = 0.0
+    chi = 0.0
+    for i in range(offsets.shape[0]):
+        if offsets[i, 2] != offsets[i, 2]:
+            continue
+        pe = x[j, 0] + offsets[i, 0]
+        pn = x[j, 1] + offsets[i, 1]
+        h, mv = bilinear_pair(z, mvar, e0, n0, inv_re, inv_rn, pe, pn)
+        if h == h and mv == mv:
+            v = su2 + mv
+            d = up + offsets[i, 2] - h
+            ll += _beam_logpdf(d * d, v, inv_u2, kind, nu)
+            chi += d * d / v
+        else:
+            ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
+            chi += out2
+    return ll, chi
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def loglik_loose_mapaware(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, out):
-    """:func:`loglik_loose` with the map-aware variance and a Gaussian or Student-t beam density."""
-    m = offsets.shape[0]
-    used = 0
-    for i in range(m):
-        if offsets[i, 2] == offsets[i, 2]:
-            used += 1
-    su2 = sig_u * sig_u
-    inv_u2 = 1.0 / su2
-    out2 = outside_sigma * outside_sigma
+    """:func:`loglik_loose` with the map-aware variance and a Gaussian or Student-t beam density
+    (``mvar`` on the nodes of ``z``)."""
+    used = offsets_used(offsets)
+    su2, inv_u2, _, _, out2 = beam_constants(sig_u, 1.0, outside_sigma)
     best = np.inf
     for j in range(x.shape[0]):
-        ll = 0.0
-        chi = 0.0
-        for i in range(m):
-            if offsets[i, 2] != offsets[i, 2]:
-                continue
-            pe = x[j, 0] + offsets[i, 0]
-            pn = x[j, 1] + offsets[i, 1]
-            h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
-            mv = bilinear(mvar, e0, n0, inv_re, inv_rn, pe, pn)
-            if h == h and mv == mv:
-                v = su2 + mv
-                d = up + offsets[i, 2] - h
-                ll += _beam_logpdf(d * d, v, inv_u2, kind, nu)
-                chi += d * d / v
-            else:
-                ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
-                chi += out2
+        ll, chi = loglik_loose_mapaware_particle(x, j, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2,
+                                                 out2, kind, nu)
         if used > 0 and chi / used < best:
             best = chi / used
         out[j] = ll

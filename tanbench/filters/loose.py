@@ -24,12 +24,15 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters import FASTMATH
 from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import loglik_loose, loglik_loose_mapaware
-from tanbench.filters.propagate import DIST_NONE, propagate_loose, propagate_tight
-from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
+from tanbench.filters.likelihood import (beam_constants, loglik_loose_mapaware_particle, loglik_loose_particle,
+                                        offsets_used)
+from tanbench.filters.propagate import DIST_NONE, propagate_loose_particle, propagate_tight
+from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
+from tanbench.filters.params import Likelihood
 from tanbench.filters.tight import keep_on_map
 from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
 from tanbench.navigation.increments import JAZE, JAZN, SZ
@@ -45,6 +48,37 @@ def init_loose(x, rng, centre_e, centre_n, half_side):
         x[j, 1] = centre_n + rng.uniform(-half_side, half_side)
 
 
+@nb.njit(cache=True, fastmath=FASTMATH)
+def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading, offsets, up, zmap, sig_u,
+                              outside_sigma, lik, ll):
+    """One pass over the particles of a loose update: for each particle, draw its three
+    normals (east, north, cross-track: the order of filling an (M, 3) array row by row),
+    move it by (``d_e``, ``d_n``) if ``propagate`` (``propagate_loose``) and weigh it
+    (``loglik_loose``, or ``loglik_loose_mapaware`` if ``lik.mapaware``, into ``ll``).
+    Returns the best chi^2 per beam. As ``tight.propagate_and_weigh``, the arithmetic is
+    the array kernels' own.
+    """
+    z, e0, n0, inv_re, inv_rn = zmap
+    su2, inv_u2, _, outside_sq, out2 = beam_constants(sig_u, 1.0, outside_sigma)
+    used = offsets_used(offsets)
+    best = np.inf
+    for j in range(x.shape[0]):
+        if propagate:
+            n_e = rng.standard_normal()
+            n_n = rng.standard_normal()
+            n_heading = rng.standard_normal()
+            propagate_loose_particle(x, j, d_e, d_n, n_e, n_n, n_heading, sig_pos, sig_heading)
+        if lik.mapaware:
+            lj, chi = loglik_loose_mapaware_particle(x, j, offsets, up, z, lik.mvar, e0, n0, inv_re, inv_rn, su2,
+                                                     inv_u2, out2, lik.kind, lik.nu)
+        else:
+            lj, chi = loglik_loose_particle(x, j, offsets, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
+        if used > 0 and chi / used < best:
+            best = chi / used
+        ll[j] = lj
+    return best
+
+
 @nb.njit(cache=True)
 def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div, half_side, readings,
                       out_en, var, cov_en_out, ess_out, reinit_out, fixed_out):
@@ -56,13 +90,11 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
     :mod:`tanbench.filters.params` (MapArgs, LooseModel, Resampling, Divergence, Readings;
     of the readings the loose filter uses ``cloud_std``, ``div_reinit`` and ``collapse_spread``).
     """
-    z, e0, n0, inv_re, inv_rn = zmap
     m = x.shape[0]
     steps = offsets.shape[0]
     logw = np.zeros(m)
     ll = np.empty(m)
     w = np.empty(m)
-    noise = np.empty((m, 3))
     uni = np.empty(m)
     idx = np.empty(m, dtype=np.int64)
     scratch = np.empty_like(x)
@@ -74,20 +106,15 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
     bad = 0
     good = 0
     consistent_chi = (0.5 * div.sigma) ** 2
+    plain = Likelihood(False, 0, 0.0, np.zeros((2, 2)))  # the fix-only loop weighs with loglik_loose
     for k in range(steps):
-        if k > 0:
-            for j in range(m):
-                noise[j, 0] = rng.standard_normal()
-                noise[j, 1] = rng.standard_normal()
-                noise[j, 2] = rng.standard_normal()
-            propagate_loose(x, d0[k - 1, 0], d0[k - 1, 1], noise, model.sig_pos, model.sig_heading)
-        best = loglik_loose(x, offsets[k], nav_up[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma,
-                            ll)
-        for j in range(m):
-            logw[j] += ll[j]
-        normalize_log_weights(logw, w)
+        d_e = d0[k - 1, 0] if k > 0 else 0.0
+        d_n = d0[k - 1, 1] if k > 0 else 0.0
+        best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, model.sig_pos, model.sig_heading, offsets[k],
+                                         nav_up[k], zmap, model.sig_u, model.outside_sigma, plain, ll)
+        mx = add_log_weights(logw, ll)
+        ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, -1, 0.0, mean, v, cov)
-        ess = effective_sample_size(w)
         good = good + 1 if (math.sqrt(v[0] + v[1]) < model.converged_std and best < consistent_chi) else 0
         converged = good >= div.steps
         if converged:
@@ -183,7 +210,6 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     Likelihood, Guard, LooseKalman); ``model.sig_heading`` is not used (the KF's heading
     std replaces it).
     """
-    z, e0, n0, inv_re, inv_rn = zmap
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[0]
@@ -192,7 +218,6 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     logw = np.zeros(m)
     ll = np.empty(m)
     w = np.empty(m)
-    noise = np.empty((m, 3))
     uni = np.empty(m)
     idx = np.empty(m, dtype=np.int64)
     scratch = np.empty_like(x)
@@ -221,6 +246,9 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     p0_yaw = p_kf[EPSI, EPSI]
     locked = False  # the cloud has converged since the last (re)initialisation
     consistent_chi = (0.5 * div.sigma) ** 2
+    d_e = 0.0  # the corrected navigation's displacement over the interval ending at update k
+    d_n = 0.0
+    sig_heading = 0.0
     for k in range(steps):
         if k > 0:
             e_before = nav[0, E]
@@ -234,11 +262,6 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
             d_n = nav[0, N] - n_before
             sig_heading = math.sqrt(p_kf[EPSI, EPSI])
             eskf_predict(p_kf, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
-            for j in range(m):
-                noise[j, 0] = rng.standard_normal()
-                noise[j, 1] = rng.standard_normal()
-                noise[j, 2] = rng.standard_normal()
-            propagate_loose(x, d_e, d_n, noise, sig_pos, sig_heading)
             # the window's prior: the same motion and process noise as the particles
             m_prior[0] += d_e
             m_prior[1] += d_n
@@ -253,16 +276,12 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
             rot[i, 0] = c * offsets[k, i, 0] - s * offsets[k, i, 1]
             rot[i, 1] = s * offsets[k, i, 0] + c * offsets[k, i, 1]
             rot[i, 2] = offsets[k, i, 2]
-        if lik.mapaware:
-            best = loglik_loose_mapaware(x, rot, nav_up[k], z, lik.mvar, e0, n0, inv_re, inv_rn, model.sig_u,
-                                         model.outside_sigma, lik.kind, lik.nu, ll)
-        else:
-            best = loglik_loose(x, rot, nav_up[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma, ll)
-        for j in range(m):
-            logw[j] += ll[j]
-        normalize_log_weights(logw, w)
+        # the particles move (k > 0) and are weighed in one pass
+        best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, sig_pos, sig_heading, rot, nav_up[k], zmap,
+                                         model.sig_u, model.outside_sigma, lik, ll)
+        mx = add_log_weights(logw, ll)
+        ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, -1, 0.0, mean, v, cov)
-        ess = effective_sample_size(w)
         spread = math.sqrt(v[0] + v[1])
         healthy = spread < converged_std and best < consistent_chi
         good = good + 1 if healthy else 0

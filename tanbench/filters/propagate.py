@@ -39,6 +39,35 @@ from tanbench.options import DISTANCE_INNOVATION
 DIST_NONE, DIST_PARTICLE, DIST_NAVIGATION = (DISTANCE_INNOVATION[k] for k in ("none", "particle", "navigation"))
 
 
+@nb.njit(cache=True, inline="always")
+def propagate_tight_particle(x, j, inc, yaw_nav0, n_e, n_n, n_u, n_pitch, n_roll, n_yaw, sig_pos, sig_up, sig_att,
+                             dist_mode):
+    """Move particle ``j`` of ``x`` as :func:`propagate_tight` does, with its six standard
+    normals ``n_*``; returns its distance innovations (east, north).
+
+    The ``*_particle`` functions are inlined into their callers and take the callers'
+    floating-point flags: call them from ``fastmath=FASTMATH`` kernels only (the array
+    kernels here and the filter loops' fused passes)."""
+    bx = x[j, BX]
+    bz = x[j, BZ]
+    s, c = sin_cos(x[j, YAW] - yaw_nav0)
+    ue = inc[D0E] + bx * inc[JAXE] - bz * inc[JAZE]
+    un = inc[D0N] + bx * inc[JAXN] - bz * inc[JAZN]
+    de = c * ue - s * un
+    dn = s * ue + c * un
+    ee = sig_pos * n_e
+    en = sig_pos * n_n
+    x[j, E] += de + ee
+    x[j, N] += dn + en
+    x[j, U] += inc[DUP] + sig_up * n_u
+    x[j, PITCH] += inc[DPITCH] + sig_att * n_pitch
+    x[j, ROLL] += inc[DROLL] + sig_att * n_roll
+    x[j, YAW] += inc[DYAW] + bx * inc[SX] - bz * inc[SZ] + sig_att * n_yaw
+    if dist_mode == DIST_NAVIGATION:
+        return inc[D0E] - (de + ee), inc[D0N] - (dn + en)
+    return 0.0, 0.0
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov):
     """Move particles ``x`` (M, 8) over one interval; fill ``dist_innov`` (M, 2).
@@ -50,27 +79,9 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
     interval start, ``noise`` (M, 6) standard normals for E, N, U, pitch, roll, yaw.
     """
     for j in range(x.shape[0]):
-        bx = x[j, BX]
-        bz = x[j, BZ]
-        s, c = sin_cos(x[j, YAW] - yaw_nav0)
-        ue = inc[D0E] + bx * inc[JAXE] - bz * inc[JAZE]
-        un = inc[D0N] + bx * inc[JAXN] - bz * inc[JAZN]
-        de = c * ue - s * un
-        dn = s * ue + c * un
-        ee = sig_pos * noise[j, 0]
-        en = sig_pos * noise[j, 1]
-        x[j, E] += de + ee
-        x[j, N] += dn + en
-        x[j, U] += inc[DUP] + sig_up * noise[j, 2]
-        x[j, PITCH] += inc[DPITCH] + sig_att * noise[j, 3]
-        x[j, ROLL] += inc[DROLL] + sig_att * noise[j, 4]
-        x[j, YAW] += inc[DYAW] + bx * inc[SX] - bz * inc[SZ] + sig_att * noise[j, 5]
-        if dist_mode == DIST_NAVIGATION:
-            dist_innov[j, 0] = inc[D0E] - (de + ee)
-            dist_innov[j, 1] = inc[D0N] - (dn + en)
-        else:
-            dist_innov[j, 0] = 0.0
-            dist_innov[j, 1] = 0.0
+        dist_innov[j, 0], dist_innov[j, 1] = propagate_tight_particle(
+            x, j, inc, yaw_nav0, noise[j, 0], noise[j, 1], noise[j, 2], noise[j, 3], noise[j, 4], noise[j, 5],
+            sig_pos, sig_up, sig_att, dist_mode)
 
 
 def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode):
@@ -95,6 +106,34 @@ def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dis
     return x, innov
 
 
+@nb.njit(cache=True, inline="always")
+def propagate_tight_euler_particle(x, j, u, dt, inc, n_e, n_n, n_u, n_pitch, n_roll, n_yaw, sig_pos, sig_up,
+                                   sig_att, dist_mode):
+    """Move particle ``j`` as :func:`propagate_tight_euler` does, with its six standard normals;
+    returns its distance innovations (east, north)."""
+    vx = u[EU_VX]
+    vy = u[EU_VY]
+    wx = u[EU_WX]
+    wz = u[EU_WZ]
+    st, ct = math.sin(x[j, PITCH]), math.cos(x[j, PITCH])
+    sg, cg = math.sin(x[j, ROLL]), math.cos(x[j, ROLL])
+    sp, cp = math.sin(x[j, YAW]), math.cos(x[j, YAW])
+    de = ((cg * cp - st * sg * sp) * vx - ct * sp * vy) * dt
+    dn = ((cg * sp + st * sg * cp) * vx + ct * cp * vy) * dt
+    yaw_rate = (-sg * (wx - x[j, BX]) + cg * (wz - x[j, BZ])) / ct
+    ee = sig_pos * n_e
+    en = sig_pos * n_n
+    x[j, E] += de + ee
+    x[j, N] += dn + en
+    x[j, U] += inc[DUP] + sig_up * n_u
+    x[j, PITCH] += inc[DPITCH] + sig_att * n_pitch
+    x[j, ROLL] += inc[DROLL] + sig_att * n_roll
+    x[j, YAW] += yaw_rate * dt + sig_att * n_yaw
+    if dist_mode == DIST_NAVIGATION:
+        return inc[D0E] - (de + ee), inc[D0N] - (dn + en)
+    return 0.0, 0.0
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov):
     """Eq. 1 read as one Euler step of length ``dt`` (the sampling time), Algorithm 1 line 4.
@@ -107,31 +146,10 @@ def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_m
     as in :func:`propagate_tight`). Noise and distance innovations as there; the
     navigation distance of ``DIST_NAVIGATION`` is the navigation system's displacement.
     """
-    vx = u[EU_VX]
-    vy = u[EU_VY]
-    wx = u[EU_WX]
-    wz = u[EU_WZ]
     for j in range(x.shape[0]):
-        st, ct = math.sin(x[j, PITCH]), math.cos(x[j, PITCH])
-        sg, cg = math.sin(x[j, ROLL]), math.cos(x[j, ROLL])
-        sp, cp = math.sin(x[j, YAW]), math.cos(x[j, YAW])
-        de = ((cg * cp - st * sg * sp) * vx - ct * sp * vy) * dt
-        dn = ((cg * sp + st * sg * cp) * vx + ct * cp * vy) * dt
-        yaw_rate = (-sg * (wx - x[j, BX]) + cg * (wz - x[j, BZ])) / ct
-        ee = sig_pos * noise[j, 0]
-        en = sig_pos * noise[j, 1]
-        x[j, E] += de + ee
-        x[j, N] += dn + en
-        x[j, U] += inc[DUP] + sig_up * noise[j, 2]
-        x[j, PITCH] += inc[DPITCH] + sig_att * noise[j, 3]
-        x[j, ROLL] += inc[DROLL] + sig_att * noise[j, 4]
-        x[j, YAW] += yaw_rate * dt + sig_att * noise[j, 5]
-        if dist_mode == DIST_NAVIGATION:
-            dist_innov[j, 0] = inc[D0E] - (de + ee)
-            dist_innov[j, 1] = inc[D0N] - (dn + en)
-        else:
-            dist_innov[j, 0] = 0.0
-            dist_innov[j, 1] = 0.0
+        dist_innov[j, 0], dist_innov[j, 1] = propagate_tight_euler_particle(
+            x, j, u, dt, inc, noise[j, 0], noise[j, 1], noise[j, 2], noise[j, 3], noise[j, 4], noise[j, 5],
+            sig_pos, sig_up, sig_att, dist_mode)
 
 
 def propagate_tight_euler_numpy(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode):
@@ -151,6 +169,14 @@ def propagate_tight_euler_numpy(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, 
     return x, innov
 
 
+@nb.njit(cache=True, inline="always")
+def propagate_loose_particle(x, j, d0e, d0n, n_e, n_n, n_heading, sig_pos, sig_heading):
+    """Move particle ``j`` as :func:`propagate_loose` does, with its three standard normals."""
+    h = sig_heading * n_heading
+    x[j, 0] += d0e + sig_pos * n_e - h * d0n
+    x[j, 1] += d0n + sig_pos * n_n + h * d0e
+
+
 @nb.njit(cache=True, fastmath=FASTMATH)
 def propagate_loose(x, d0e, d0n, noise, sig_pos, sig_heading):
     """Loose filter: move every particle by the navigation displacement plus noise.
@@ -160,9 +186,7 @@ def propagate_loose(x, d0e, d0n, noise, sig_pos, sig_heading):
     navigation system's heading uncertainty (rad) causes over the interval.
     """
     for j in range(x.shape[0]):
-        h = sig_heading * noise[j, 2]
-        x[j, 0] += d0e + sig_pos * noise[j, 0] - h * d0n
-        x[j, 1] += d0n + sig_pos * noise[j, 1] + h * d0e
+        propagate_loose_particle(x, j, d0e, d0n, noise[j, 0], noise[j, 1], noise[j, 2], sig_pos, sig_heading)
 
 
 def propagate_loose_numpy(x, d0e, d0n, noise, sig_pos, sig_heading):

@@ -37,19 +37,57 @@ REG_NONE, REG_LIU_WEST, REG_GORDON = (REGULARISATION[k] for k in ("none", "liu-w
 
 
 @nb.njit(cache=True)
-def normalize_log_weights(logw, w):
-    """Normalised weights into ``w`` from log-weights; returns log of the mean likelihood."""
+def max_log_weight(logw):
+    """The largest log-weight (-inf for none; NaN entries are passed over)."""
     mx = -np.inf
     for j in range(logw.shape[0]):
         if logw[j] > mx:
             mx = logw[j]
+    return mx
+
+
+@nb.njit(cache=True)
+def exp_weights(logw, mx, w):
+    """Unnormalised weights ``w = exp(logw - mx)``; returns their sum."""
     total = 0.0
     for j in range(logw.shape[0]):
         w[j] = math.exp(logw[j] - mx)
         total += w[j]
+    return total
+
+
+@nb.njit(cache=True)
+def normalize_log_weights(logw, w):
+    """Normalised weights into ``w`` from log-weights; returns log of the mean likelihood."""
+    mx = max_log_weight(logw)
+    total = exp_weights(logw, mx, w)
     for j in range(logw.shape[0]):
         w[j] /= total
     return mx + math.log(total / logw.shape[0])
+
+
+@nb.njit(cache=True)
+def normalise_with_ess(logw, mx, w):
+    """:func:`normalize_log_weights` into ``w`` given the largest log-weight ``mx``, with the
+    :func:`effective_sample_size` of the result (returned) computed in the dividing pass:
+    the same numbers as the two kernels, in two passes instead of four."""
+    total = exp_weights(logw, mx, w)
+    sum_sq = 0.0
+    for j in range(logw.shape[0]):
+        w[j] /= total
+        sum_sq += w[j] * w[j]
+    return 1.0 / sum_sq
+
+
+@nb.njit(cache=True)
+def add_log_weights(logw, ll):
+    """``logw += ll``; returns the largest log-weight (as :func:`max_log_weight`)."""
+    mx = -np.inf
+    for j in range(logw.shape[0]):
+        logw[j] += ll[j]
+        if logw[j] > mx:
+            mx = logw[j]
+    return mx
 
 
 def normalize_log_weights_numpy(logw):

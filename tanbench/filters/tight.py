@@ -36,10 +36,12 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters.cloud import gaussian_horizontal
+from tanbench.filters import FASTMATH
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import loglik_tight, loglik_tight_mapaware
-from tanbench.filters.propagate import propagate_tight, propagate_tight_euler
-from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
+from tanbench.filters.likelihood import (attitude_reference, beam_constants, beams_used, loglik_tight_mapaware_particle,
+                                        loglik_tight_particle)
+from tanbench.filters.propagate import propagate_tight_euler_particle, propagate_tight_particle
+from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
 
 REGULARISED_STATES = {
@@ -66,6 +68,55 @@ def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
         x[j, 7] = prior.std_bias * rng.standard_normal()
 
 
+@nb.njit(cache=True, fastmath=FASTMATH)
+def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, euler_in, readings, model, beams, ranges, zmap, lik,
+                        ref_pitch, ref_roll, ref_yaw, ll):
+    """One pass over the particles of a tight update: for each particle, draw its six
+    propagation normals (E, N, U, pitch, roll, yaw: the same numbers in the same order as
+    filling an (M, 6) array row by row), move it (if ``propagate``: ``propagate_tight``, or
+    ``propagate_tight_euler`` if ``readings.propagation``) and weigh it (``loglik_tight`` or
+    ``loglik_tight_mapaware``, into ``ll``); the cloud is read once instead of twice and no
+    noise or innovation arrays are written. Returns the best chi^2 per beam.
+
+    The per-particle arithmetic is the array kernels' (their ``*_particle`` functions, under
+    the same flags); the log-weights are accumulated outside (``resample.add_log_weights``),
+    where no reassociation reaches them.
+    """
+    z, e0, n0, inv_re, inv_rn = zmap
+    su2, inv_u2, inv_d2, outside_sq, out2 = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
+    att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
+    used = beams_used(ranges)
+    euler = readings.propagation != 0
+    best = np.inf
+    for j in range(x.shape[0]):
+        dist_e = 0.0
+        dist_n = 0.0
+        if propagate:
+            n_e = rng.standard_normal()
+            n_n = rng.standard_normal()
+            n_u = rng.standard_normal()
+            n_pitch = rng.standard_normal()
+            n_roll = rng.standard_normal()
+            n_yaw = rng.standard_normal()
+            if euler:
+                dist_e, dist_n = propagate_tight_euler_particle(x, j, euler_in, readings.dt, inc, n_e, n_n, n_u,
+                                                                n_pitch, n_roll, n_yaw, model.sig_pos, model.sig_up,
+                                                                model.sig_att, model.dist_mode)
+            else:
+                dist_e, dist_n = propagate_tight_particle(x, j, inc, yaw_nav0, n_e, n_n, n_u, n_pitch, n_roll, n_yaw,
+                                                          model.sig_pos, model.sig_up, model.sig_att, model.dist_mode)
+        if lik.mapaware:
+            lj, chi = loglik_tight_mapaware_particle(x, j, beams, ranges, z, lik.mvar, e0, n0, inv_re, inv_rn, su2,
+                                                     inv_u2, out2, att, lik.kind, lik.nu, dist_e, dist_n, inv_d2)
+        else:
+            lj, chi = loglik_tight_particle(x, j, beams, ranges, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
+                                            dist_e, dist_n, inv_d2)
+        if used > 0 and chi / used < best:
+            best = chi / used
+        ll[j] = lj
+    return best
+
+
 @nb.njit(cache=True)
 def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, zmap, model, rs, div,
                       prior, readings, euler_in, lik, guard, est, var, cov_en_out, ess_out, reinit_out,
@@ -85,45 +136,29 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
     reinitialised there (:func:`keep_on_map`). ``healthy_out[k]`` is 1 when the cloud std
     is below ``guard.healthy_std`` and the best fit within half the divergence threshold.
     """
-    z, e0, n0, inv_re, inv_rn = zmap
     m = x.shape[0]
     steps = ranges.shape[0]
     logw = np.zeros(m)
     ll = np.empty(m)
     w = np.empty(m)
-    noise = np.empty((m, 6))
-    dist = np.zeros((m, 2))
     uni = np.empty(m)
     idx = np.empty(m, dtype=np.int64)
     scratch = np.empty_like(x)
     mean = np.empty(N_TIGHT)
     v = np.empty(N_TIGHT)
     cov = np.empty((2, 2))
+    no_inc = np.zeros(inc.shape[1])  # the interval before update 0: none, nothing moves
+    no_euler = np.zeros(euler_in.shape[1])
     bad = 0
     locked = False  # the cloud has converged since the last (re)initialisation
     for k in range(steps):
-        if k > 0:
-            for j in range(m):
-                for c in range(6):
-                    noise[j, c] = rng.standard_normal()
-            if readings.propagation != 0:
-                propagate_tight_euler(x, euler_in[k - 1], readings.dt, inc[k - 1], noise, model.sig_pos,
-                                      model.sig_up, model.sig_att, model.dist_mode, dist)
-            else:
-                propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up, model.sig_att,
-                                model.dist_mode, dist)
-        if lik.mapaware:
-            best = loglik_tight_mapaware(x, beams, ranges[k], z, lik.mvar, e0, n0, inv_re, inv_rn, model.sig_u,
-                                         model.outside_sigma, dist, model.sig_d, nav_pitch[k], nav_roll[k],
-                                         nav_yaw[k], lik.kind, lik.nu, ll)
-        else:
-            best = loglik_tight(x, beams, ranges[k], z, e0, n0, inv_re, inv_rn, model.sig_u, model.outside_sigma,
-                                dist, model.sig_d, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
-        for j in range(m):
-            logw[j] += ll[j]
-        normalize_log_weights(logw, w)
+        inc_k = inc[k - 1] if k > 0 else no_inc
+        euler_k = euler_in[k - 1] if k > 0 and readings.propagation != 0 else no_euler
+        best = propagate_and_weigh(x, rng, k > 0, inc_k, nav_yaw[max(k - 1, 0)], euler_k, readings, model, beams,
+                                   ranges[k], zmap, lik, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
+        mx = add_log_weights(logw, ll)
+        ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)
-        ess = effective_sample_size(w)
         spread = math.sqrt(v[E] + v[N])
         off_map = keep_on_map(mean, guard.bounds)
         est[k, :] = mean

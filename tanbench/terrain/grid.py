@@ -101,27 +101,52 @@ EDGE_TOL = 1e-9  # grid cells
 
 
 @nb.njit(cache=True, inline="always")
-def bilinear(z, e0, n0, inv_re, inv_rn, e, n):
-    """Bilinear interpolation of grid ``z`` at (e, n); NaN outside the node extent."""
+def bilinear_cell(ny, nx, e0, n0, inv_re, inv_rn, e, n):
+    """The grid cell under (e, n) of a (ny, nx) grid and the position in it: (i, j, tx, ty).
+
+    ``i`` is -1 outside the node extent. Shared by :func:`bilinear` and
+    :func:`bilinear_pair` (two grids on the same nodes, one cell look-up).
+    """
     fx = (e - e0) * inv_re
     fy = (n - n0) * inv_rn
-    nx = z.shape[1]
-    ny = z.shape[0]
     if not (fx >= 0.0 and fy >= 0.0 and fx <= nx - 1 + EDGE_TOL and fy <= ny - 1 + EDGE_TOL):
-        return np.nan
+        return -1, 0, 0.0, 0.0
     j = int(fx)
     i = int(fy)
     if j > nx - 2:
         j = nx - 2
     if i > ny - 2:
         i = ny - 2
-    tx = fx - j
-    ty = fy - i
+    return i, j, fx - j, fy - i
+
+
+@nb.njit(cache=True, inline="always")
+def bilinear_in_cell(z, i, j, tx, ty):
+    """Bilinear value of grid ``z`` at position (tx, ty) in cell (i, j) (from :func:`bilinear_cell`)."""
     z00 = z[i, j]
     z01 = z[i, j + 1]
     z10 = z[i + 1, j]
     z11 = z[i + 1, j + 1]
     return (z00 * (1.0 - tx) + z01 * tx) * (1.0 - ty) + (z10 * (1.0 - tx) + z11 * tx) * ty
+
+
+@nb.njit(cache=True, inline="always")
+def bilinear(z, e0, n0, inv_re, inv_rn, e, n):
+    """Bilinear interpolation of grid ``z`` at (e, n); NaN outside the node extent."""
+    i, j, tx, ty = bilinear_cell(z.shape[0], z.shape[1], e0, n0, inv_re, inv_rn, e, n)
+    if i < 0:
+        return np.nan
+    return bilinear_in_cell(z, i, j, tx, ty)
+
+
+@nb.njit(cache=True, inline="always")
+def bilinear_pair(z, z2, e0, n0, inv_re, inv_rn, e, n):
+    """(:func:`bilinear` of ``z``, of ``z2``) at (e, n): two grids of the same shape and nodes
+    (e.g. a map and its variance grid) from one cell look-up; (NaN, NaN) outside."""
+    i, j, tx, ty = bilinear_cell(z.shape[0], z.shape[1], e0, n0, inv_re, inv_rn, e, n)
+    if i < 0:
+        return np.nan, np.nan
+    return bilinear_in_cell(z, i, j, tx, ty), bilinear_in_cell(z2, i, j, tx, ty)
 
 
 @nb.njit(cache=True)
