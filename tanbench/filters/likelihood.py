@@ -25,7 +25,7 @@ from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import sin_cos_about
 from tanbench.options import LIKELIHOOD
-from tanbench.terrain.grid import bilinear, bilinear_numpy, bilinear_pair
+from tanbench.terrain.grid import bilinear, bilinear_numpy, bilinear_pair, stack_grids
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 
@@ -62,29 +62,37 @@ def _particle_dcm(x, j, att):
 
 
 @nb.njit(cache=True)
-def beams_used(ranges):
-    """Number of beams with a range (not NaN)."""
+def beam_vectors(beams, ranges):
+    """(n, 3) beam vectors times ranges, body frame, of the n beams with a range (not NaN), in
+    beam order: what the per-particle kernels below loop over."""
     used = 0
     for i in range(ranges.shape[0]):
         if ranges[i] == ranges[i]:
             used += 1
-    return used
+    vec = np.empty((used, 3))
+    k = 0
+    for i in range(ranges.shape[0]):
+        r = ranges[i]
+        if r == r:
+            vec[k, 0] = beams[i, 0] * r
+            vec[k, 1] = beams[i, 1] * r
+            vec[k, 2] = beams[i, 2] * r
+            k += 1
+    return vec
 
 
 @nb.njit(cache=True, inline="always")
-def loglik_tight_particle(x, j, beams, ranges, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
+def loglik_tight_particle(x, j, vec, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
                           dist_e, dist_n, inv_d2):
     """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_tight` (and the fused filter
-    loop): ``att`` from :func:`attitude_reference`, ``dist_*`` its distance innovations."""
+    loop): ``vec`` from :func:`beam_vectors`, ``att`` from :func:`attitude_reference`, ``dist_*``
+    its distance innovations."""
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _particle_dcm(x, j, att)
     sq = 0.0
-    for i in range(beams.shape[0]):
-        r = ranges[i]
-        if r != r:
-            continue
-        a0 = beams[i, 0] * r
-        a1 = beams[i, 1] * r
-        a2 = beams[i, 2] * r
+    for i in range(vec.shape[0]):
+        a0 = vec[i, 0]
+        a1 = vec[i, 1]
+        a2 = vec[i, 2]
         pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
         pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
         pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
@@ -105,12 +113,13 @@ def loglik_tight(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outside_sig
     ``ref_*`` (the navigation attitude) only speed up the trigonometry: each particle's
     angles are evaluated as reference plus a usually small offset (``trig.sin_cos_about``).
     """
-    used = beams_used(ranges)
+    vec = beam_vectors(beams, ranges)
+    used = vec.shape[0]
     _, inv_u2, inv_d2, outside_sq, _ = beam_constants(sig_u, sig_d, outside_sigma)
     att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
     best = np.inf
     for j in range(x.shape[0]):
-        ll, chi = loglik_tight_particle(x, j, beams, ranges, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
+        ll, chi = loglik_tight_particle(x, j, vec, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
                                         dist_innov[j, 0], dist_innov[j, 1], inv_d2)
         if used > 0 and chi / used < best:
             best = chi / used
@@ -133,22 +142,29 @@ def loglik_tight_numpy(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outsi
 
 
 @nb.njit(cache=True)
-def offsets_used(offsets):
-    """Number of beam offsets (m, 3) with a range (third column not NaN)."""
+def used_offsets(offsets):
+    """The rows of beam offsets ``offsets`` (m, 3) with a range (third column not NaN), in order."""
     used = 0
     for i in range(offsets.shape[0]):
         if offsets[i, 2] == offsets[i, 2]:
             used += 1
-    return used
+    out = np.empty((used, 3))
+    k = 0
+    for i in range(offsets.shape[0]):
+        if offsets[i, 2] == offsets[i, 2]:
+            out[k, 0] = offsets[i, 0]
+            out[k, 1] = offsets[i, 1]
+            out[k, 2] = offsets[i, 2]
+            k += 1
+    return out
 
 
 @nb.njit(cache=True, inline="always")
 def loglik_loose_particle(x, j, offsets, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq):
-    """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_loose`."""
+    """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_loose`; ``offsets``: the
+    beams with a range (:func:`used_offsets`)."""
     sq = 0.0
     for i in range(offsets.shape[0]):
-        if offsets[i, 2] != offsets[i, 2]:
-            continue
         h = bilinear(z, e0, n0, inv_re, inv_rn, x[j, 0] + offsets[i, 0], x[j, 1] + offsets[i, 1])
         if h == h:
             d = up + offsets[i, 2] - h
@@ -165,11 +181,12 @@ def loglik_loose(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma
 
     Rows of ``offsets`` with NaN are beams without a range and are skipped.
     """
-    used = offsets_used(offsets)
+    rows = used_offsets(offsets)
+    used = rows.shape[0]
     _, inv_u2, _, outside_sq, _ = beam_constants(sig_u, 1.0, outside_sigma)
     best = np.inf
     for j in range(x.shape[0]):
-        ll, chi = loglik_loose_particle(x, j, offsets, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
+        ll, chi = loglik_loose_particle(x, j, rows, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
         if used > 0 and chi / used < best:
             best = chi / used
         out[j] = ll
@@ -206,13 +223,40 @@ def loglik_loose_numpy(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside
 LIK_GAUSSIAN, LIK_STUDENT = LIKELIHOOD["gaussian"], LIKELIHOOD["student-t"]
 
 
-@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
-def _beam_logpdf(d2, v, inv_u2, kind, nu):
-    """Log-density of one beam's squared innovation ``d2`` with variance ``v``."""
-    norm = -0.5 * math.log(v * inv_u2)
+# The jitted kernels sum the beams' log-densities as logs of products: one log per particle
+# for the normalisers and one for the Student-t terms, instead of one or two per beam (the
+# logs were most of the likelihood's cost). Each factor is >= 1; a product past
+# PRODUCT_LOG_AT is moved into the log sum, so nothing overflows whatever the beam count.
+PRODUCT_LOG_AT = 1e150
+
+
+@nb.njit(cache=True, inline="always")
+def _beam_terms_add(acc, d2, v, inv_u2, kind, nu):
+    """Add one beam (squared innovation ``d2``, variance ``v``) to the density accumulator
+    ``acc`` = (log sum, normaliser product, Student-t product, Gaussian quadratic sum)."""
+    logs, norm, student, quad = acc
+    norm *= v * inv_u2
     if kind == LIK_STUDENT:
-        return -0.5 * (nu + 1.0) * math.log(1.0 + d2 / (nu * v)) + norm
-    return -0.5 * d2 / v + norm
+        student *= 1.0 + d2 / (nu * v)
+    else:
+        quad += -0.5 * d2 / v
+    if norm > PRODUCT_LOG_AT:
+        logs += -0.5 * math.log(norm)
+        norm = 1.0
+    if student > PRODUCT_LOG_AT:
+        logs += -0.5 * (nu + 1.0) * math.log(student)
+        student = 1.0
+    return logs, norm, student, quad
+
+
+@nb.njit(cache=True, inline="always")
+def _beam_terms_total(acc, kind, nu):
+    """The sum of the beams' log-densities (constants dropped) from the accumulator."""
+    logs, norm, student, quad = acc
+    total = logs - 0.5 * math.log(norm) + quad
+    if kind == LIK_STUDENT:
+        total += -0.5 * (nu + 1.0) * math.log(student)
+    return total
 
 
 def _beam_logpdf_numpy(d2, v, sig_u, kind, nu):
@@ -223,47 +267,56 @@ def _beam_logpdf_numpy(d2, v, sig_u, kind, nu):
 
 
 @nb.njit(cache=True, inline="always")
-def loglik_tight_mapaware_particle(x, j, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, att,
+def loglik_tight_mapaware_particle(x, j, vec, zv, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, att,
                                    kind, nu, dist_e, dist_n, inv_d2):
-    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_tight_mapaware`."""
+    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_tight_mapaware`;
+    ``zv``: the map and its variance grid interleaved (``grid.stack_grids``)."""
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _particle_dcm(x, j, att)
-    ll = 0.0
+    acc = (0.0, 1.0, 1.0, 0.0)
     chi = 0.0
-    for i in range(beams.shape[0]):
-        r = ranges[i]
-        if r != r:
-            continue
-        a0 = beams[i, 0] * r
-        a1 = beams[i, 1] * r
-        a2 = beams[i, 2] * r
+    for i in range(vec.shape[0]):
+        a0 = vec[i, 0]
+        a1 = vec[i, 1]
+        a2 = vec[i, 2]
         pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
         pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
         pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
-        h, mv = bilinear_pair(z, mvar, e0, n0, inv_re, inv_rn, pe, pn)
+        h, mv = bilinear_pair(zv, e0, n0, inv_re, inv_rn, pe, pn)
         if h == h and mv == mv:
             v = su2 + mv
             d2 = (pu - h) * (pu - h)
-            ll += _beam_logpdf(d2, v, inv_u2, kind, nu)
+            acc = _beam_terms_add(acc, d2, v, inv_u2, kind, nu)
             chi += d2 / v
         else:
-            ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
+            acc = _beam_terms_add(acc, out2 * su2, su2, inv_u2, kind, nu)
             chi += out2
-    return ll - 0.5 * (dist_e ** 2 + dist_n ** 2) * inv_d2, chi
+    return _beam_terms_total(acc, kind, nu) - 0.5 * (dist_e ** 2 + dist_n ** 2) * inv_d2, chi
 
 
-@nb.njit(cache=True, fastmath=FASTMATH)
+@nb.njit(cache=True)
 def loglik_tight_mapaware(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
                           dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out):
     """:func:`loglik_tight` with per-beam variance ``sig_u^2 + mvar`` at the footprint and a
     Gaussian or Student-t beam density; returns the best mean d^2 / v per beam.
 
-    ``mvar`` has the shape and nodes of ``z`` (one cell look-up serves both)."""
-    used = beams_used(ranges)
+    ``mvar`` has the shape and nodes of ``z``; the grids are interleaved first
+    (:func:`loglik_tight_mapaware_stacked` takes them so, as the filter loop does once per run).
+    """
+    return loglik_tight_mapaware_stacked(x, beams, ranges, stack_grids(z, mvar), e0, n0, inv_re, inv_rn, sig_u,
+                                         outside_sigma, dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def loglik_tight_mapaware_stacked(x, beams, ranges, zv, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
+                                  dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out):
+    """:func:`loglik_tight_mapaware` on the interleaved map and variance grid ``zv``."""
+    vec = beam_vectors(beams, ranges)
+    used = vec.shape[0]
     su2, inv_u2, inv_d2, _, out2 = beam_constants(sig_u, sig_d, outside_sigma)
     att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
     best = np.inf
     for j in range(x.shape[0]):
-        ll, chi = loglik_tight_mapaware_particle(x, j, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2,
+        ll, chi = loglik_tight_mapaware_particle(x, j, vec, zv, e0, n0, inv_re, inv_rn, su2, inv_u2,
                                                  out2, att, kind, nu, dist_innov[j, 0], dist_innov[j, 1], inv_d2)
         if used > 0 and chi / used < best:
             best = chi / used
@@ -295,36 +348,43 @@ def _mapaware_terms(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_
 
 
 @nb.njit(cache=True, inline="always")
-def loglik_loose_mapaware_particle(x, j, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, kind, nu):
-    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_loose_mapaware`."""
-    ll = 0.0
+def loglik_loose_mapaware_particle(x, j, offsets, up, zv, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, kind, nu):
+    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_loose_mapaware`
+    (``zv`` as in :func:`loglik_tight_mapaware_particle`)."""
+    acc = (0.0, 1.0, 1.0, 0.0)
     chi = 0.0
     for i in range(offsets.shape[0]):
-        if offsets[i, 2] != offsets[i, 2]:
-            continue
         pe = x[j, 0] + offsets[i, 0]
         pn = x[j, 1] + offsets[i, 1]
-        h, mv = bilinear_pair(z, mvar, e0, n0, inv_re, inv_rn, pe, pn)
+        h, mv = bilinear_pair(zv, e0, n0, inv_re, inv_rn, pe, pn)
         if h == h and mv == mv:
             v = su2 + mv
             d = up + offsets[i, 2] - h
-            ll += _beam_logpdf(d * d, v, inv_u2, kind, nu)
+            acc = _beam_terms_add(acc, d * d, v, inv_u2, kind, nu)
             chi += d * d / v
         else:
-            ll += _beam_logpdf(out2 * su2, su2, inv_u2, kind, nu)
+            acc = _beam_terms_add(acc, out2 * su2, su2, inv_u2, kind, nu)
             chi += out2
-    return ll, chi
+    return _beam_terms_total(acc, kind, nu), chi
+
+
+@nb.njit(cache=True)
+def loglik_loose_mapaware(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, out):
+    """:func:`loglik_loose` with the map-aware variance and a Gaussian or Student-t beam density
+    (``mvar`` on the nodes of ``z``; interleaved first, as in :func:`loglik_tight_mapaware`)."""
+    return loglik_loose_mapaware_stacked(x, offsets, up, stack_grids(z, mvar), e0, n0, inv_re, inv_rn, sig_u,
+                                         outside_sigma, kind, nu, out)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def loglik_loose_mapaware(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, out):
-    """:func:`loglik_loose` with the map-aware variance and a Gaussian or Student-t beam density
-    (``mvar`` on the nodes of ``z``)."""
-    used = offsets_used(offsets)
+def loglik_loose_mapaware_stacked(x, offsets, up, zv, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, out):
+    """:func:`loglik_loose_mapaware` on the interleaved map and variance grid ``zv``."""
+    rows = used_offsets(offsets)
+    used = rows.shape[0]
     su2, inv_u2, _, _, out2 = beam_constants(sig_u, 1.0, outside_sigma)
     best = np.inf
     for j in range(x.shape[0]):
-        ll, chi = loglik_loose_mapaware_particle(x, j, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, su2, inv_u2,
+        ll, chi = loglik_loose_mapaware_particle(x, j, rows, up, zv, e0, n0, inv_re, inv_rn, su2, inv_u2,
                                                  out2, kind, nu)
         if used > 0 and chi / used < best:
             best = chi / used

@@ -28,7 +28,7 @@ from tanbench.filters import FASTMATH
 from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (beam_constants, loglik_loose_mapaware_particle, loglik_loose_particle,
-                                        offsets_used)
+                                        used_offsets)
 from tanbench.filters.propagate import DIST_NONE, propagate_loose_particle, propagate_tight
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
@@ -60,7 +60,8 @@ def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading,
     """
     z, e0, n0, inv_re, inv_rn = zmap
     su2, inv_u2, _, outside_sq, out2 = beam_constants(sig_u, 1.0, outside_sigma)
-    used = offsets_used(offsets)
+    rows = used_offsets(offsets)
+    used = rows.shape[0]
     best = np.inf
     for j in range(x.shape[0]):
         if propagate:
@@ -69,10 +70,10 @@ def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading,
             n_heading = rng.standard_normal()
             propagate_loose_particle(x, j, d_e, d_n, n_e, n_n, n_heading, sig_pos, sig_heading)
         if lik.mapaware:
-            lj, chi = loglik_loose_mapaware_particle(x, j, offsets, up, z, lik.mvar, e0, n0, inv_re, inv_rn, su2,
+            lj, chi = loglik_loose_mapaware_particle(x, j, rows, up, lik.grids, e0, n0, inv_re, inv_rn, su2,
                                                      inv_u2, out2, lik.kind, lik.nu)
         else:
-            lj, chi = loglik_loose_particle(x, j, offsets, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
+            lj, chi = loglik_loose_particle(x, j, rows, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
         if used > 0 and chi / used < best:
             best = chi / used
         ll[j] = lj
@@ -106,7 +107,7 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
     bad = 0
     good = 0
     consistent_chi = (0.5 * div.sigma) ** 2
-    plain = Likelihood(False, 0, 0.0, np.zeros((2, 2)))  # the fix-only loop weighs with loglik_loose
+    plain = Likelihood(False, 0, 0.0, np.zeros((2, 2, 2)))  # the fix-only loop weighs with loglik_loose
     for k in range(steps):
         d_e = d0[k - 1, 0] if k > 0 else 0.0
         d_n = d0[k - 1, 1] if k > 0 else 0.0

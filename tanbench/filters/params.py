@@ -38,8 +38,9 @@ Readings = namedtuple("Readings", "propagation dt cloud_std div_reinit collapse_
 
 # measurement model of the map-aware kernels (filters/likelihood.py): use them (``mapaware``),
 # beam density code (``kind``, options.LIKELIHOOD) and Student-t degrees of freedom ``nu``,
-# and the map's representation-variance grid ``mvar`` (terrain/representation.py)
-Likelihood = namedtuple("Likelihood", "mapaware kind nu mvar")
+# and ``grids`` (ny, nx, 2): the navigation map's heights and its representation-variance grid
+# (terrain/representation.py) interleaved node by node (``terrain.grid.stack_grids``)
+Likelihood = namedtuple("Likelihood", "mapaware kind nu grids")
 
 # divergence guards: a horizontal cloud std above ``spread_limit`` m (once converged) counts
 # as a bad update; a cloud std below ``healthy_std`` with a good fit is "healthy" (recovery

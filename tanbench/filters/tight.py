@@ -38,7 +38,7 @@ import numpy as np
 from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters import FASTMATH
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (attitude_reference, beam_constants, beams_used, loglik_tight_mapaware_particle,
+from tanbench.filters.likelihood import (attitude_reference, beam_constants, beam_vectors, loglik_tight_mapaware_particle,
                                         loglik_tight_particle)
 from tanbench.filters.propagate import propagate_tight_euler_particle, propagate_tight_particle
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
@@ -85,7 +85,8 @@ def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, euler_in, readings, mo
     z, e0, n0, inv_re, inv_rn = zmap
     su2, inv_u2, inv_d2, outside_sq, out2 = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
     att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
-    used = beams_used(ranges)
+    vec = beam_vectors(beams, ranges)
+    used = vec.shape[0]
     euler = readings.propagation != 0
     best = np.inf
     for j in range(x.shape[0]):
@@ -106,10 +107,10 @@ def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, euler_in, readings, mo
                 dist_e, dist_n = propagate_tight_particle(x, j, inc, yaw_nav0, n_e, n_n, n_u, n_pitch, n_roll, n_yaw,
                                                           model.sig_pos, model.sig_up, model.sig_att, model.dist_mode)
         if lik.mapaware:
-            lj, chi = loglik_tight_mapaware_particle(x, j, beams, ranges, z, lik.mvar, e0, n0, inv_re, inv_rn, su2,
+            lj, chi = loglik_tight_mapaware_particle(x, j, vec, lik.grids, e0, n0, inv_re, inv_rn, su2,
                                                      inv_u2, out2, att, lik.kind, lik.nu, dist_e, dist_n, inv_d2)
         else:
-            lj, chi = loglik_tight_particle(x, j, beams, ranges, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
+            lj, chi = loglik_tight_particle(x, j, vec, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
                                             dist_e, dist_n, inv_d2)
         if used > 0 and chi / used < best:
             best = chi / used

@@ -81,14 +81,16 @@ def likelihood_bundle(f, nmap):
     (``filter.map_aware_likelihood``), else zero (terrain/representation.py)."""
     from tanbench.filters.params import Likelihood
     from tanbench.options import LIKELIHOOD
+    from tanbench.terrain.grid import stack_grids
     from tanbench.terrain.representation import map_variance_grid
 
     mapaware = f.map_aware_likelihood or f.likelihood != "gaussian"
     if f.map_aware_likelihood:
         mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
     else:
-        mvar = np.where(np.isnan(nmap.z), np.nan, 0.0) if mapaware else np.zeros((2, 2))
-    return Likelihood(bool(mapaware), LIKELIHOOD[f.likelihood], float(f.student_nu), mvar)
+        mvar = np.where(np.isnan(nmap.z), np.nan, 0.0) if mapaware else None
+    grids = stack_grids(nmap.z, mvar) if mvar is not None else np.zeros((2, 2, 2))
+    return Likelihood(bool(mapaware), LIKELIHOOD[f.likelihood], float(f.student_nu), grids)
 
 
 def guard_bundle(f, nmap):

@@ -121,13 +121,14 @@ def bilinear_cell(ny, nx, e0, n0, inv_re, inv_rn, e, n):
 
 
 @nb.njit(cache=True, inline="always")
+def _bilinear_weights(z00, z01, z10, z11, tx, ty):
+    return (z00 * (1.0 - tx) + z01 * tx) * (1.0 - ty) + (z10 * (1.0 - tx) + z11 * tx) * ty
+
+
+@nb.njit(cache=True, inline="always")
 def bilinear_in_cell(z, i, j, tx, ty):
     """Bilinear value of grid ``z`` at position (tx, ty) in cell (i, j) (from :func:`bilinear_cell`)."""
-    z00 = z[i, j]
-    z01 = z[i, j + 1]
-    z10 = z[i + 1, j]
-    z11 = z[i + 1, j + 1]
-    return (z00 * (1.0 - tx) + z01 * tx) * (1.0 - ty) + (z10 * (1.0 - tx) + z11 * tx) * ty
+    return _bilinear_weights(z[i, j], z[i, j + 1], z[i + 1, j], z[i + 1, j + 1], tx, ty)
 
 
 @nb.njit(cache=True, inline="always")
@@ -139,14 +140,30 @@ def bilinear(z, e0, n0, inv_re, inv_rn, e, n):
     return bilinear_in_cell(z, i, j, tx, ty)
 
 
+@nb.njit(cache=True)
+def stack_grids(z, z2):
+    """Two grids of the same shape interleaved node by node: (ny, nx, 2), ``[..., 0]`` = ``z``.
+
+    :func:`bilinear_pair` reads both values of a node from one cache line (the map-aware
+    likelihoods' map and variance grid)."""
+    ny, nx = z.shape
+    out = np.empty((ny, nx, 2))
+    for i in range(ny):
+        for j in range(nx):
+            out[i, j, 0] = z[i, j]
+            out[i, j, 1] = z2[i, j]
+    return out
+
+
 @nb.njit(cache=True, inline="always")
-def bilinear_pair(z, z2, e0, n0, inv_re, inv_rn, e, n):
-    """(:func:`bilinear` of ``z``, of ``z2``) at (e, n): two grids of the same shape and nodes
-    (e.g. a map and its variance grid) from one cell look-up; (NaN, NaN) outside."""
-    i, j, tx, ty = bilinear_cell(z.shape[0], z.shape[1], e0, n0, inv_re, inv_rn, e, n)
+def bilinear_pair(zz, e0, n0, inv_re, inv_rn, e, n):
+    """(:func:`bilinear` of ``zz[..., 0]``, of ``zz[..., 1]``) at (e, n) from one cell look-up,
+    ``zz`` from :func:`stack_grids`; (NaN, NaN) outside."""
+    i, j, tx, ty = bilinear_cell(zz.shape[0], zz.shape[1], e0, n0, inv_re, inv_rn, e, n)
     if i < 0:
         return np.nan, np.nan
-    return bilinear_in_cell(z, i, j, tx, ty), bilinear_in_cell(z2, i, j, tx, ty)
+    return (_bilinear_weights(zz[i, j, 0], zz[i, j + 1, 0], zz[i + 1, j, 0], zz[i + 1, j + 1, 0], tx, ty),
+            _bilinear_weights(zz[i, j, 1], zz[i, j + 1, 1], zz[i + 1, j, 1], zz[i + 1, j + 1, 1], tx, ty))
 
 
 @nb.njit(cache=True)
