@@ -30,9 +30,11 @@ import math
 
 import numba as nb
 import numpy as np
+from llvmlite import ir
 from numba.core import cgutils, types
-from numba.extending import (NativeValue, make_attribute_wrapper, models, overload, overload_method,
+from numba.extending import (NativeValue, intrinsic, make_attribute_wrapper, models, overload, overload_method,
                              register_model, typeof_impl, unbox)
+from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 
 STATE_WORDS = 4
 FAST_STREAM = 0xFA57  # appended to the run's spawn key: the fast generator's own stream
@@ -279,6 +281,180 @@ def _ol_normal(rng, loc=0.0, scale=1.0):
     return impl
 
 
+# ---- numpy's own stream, drawn inline (``random_numbers: numpy``) -------------------------------
+# A numpy Generator inside numba costs an indirect call into the bit generator per 64-bit
+# word. For a Generator on PCG64 (numpy's default), :class:`Pcg64Stream` steps the very
+# same PCG64 state in place from jitted code (128-bit LCG, XSL-RR output, as numpy's
+# pcg64.h) and applies the same transformations numba's Generator methods apply (numpy's
+# 256-layer ziggurat and tables, uniforms as 53-bit words): the same numbers in the same
+# order, the Generator's state advanced exactly as if it had drawn them itself.
+PCG64_MULTIPLIER = (2549297995355413924 << 64) + 4865540595714422341
+
+
+@intrinsic
+def _pcg64_next(typingctx, words):
+    """One PCG64 step on ``words`` (uint64[4]: state low, high, increment low, high); the output."""
+    sig = types.uint64(words)
+
+    def codegen(context, builder, signature, args):
+        ptr = args[0]
+        i64, i128 = ir.IntType(64), ir.IntType(128)
+        slots = [builder.gep(ptr, [ir.Constant(ir.IntType(32), k)]) for k in range(4)]
+        lo, hi, inc_lo, inc_hi = (builder.load(p) for p in slots)
+
+        def wide(low, high):
+            return builder.or_(builder.zext(low, i128), builder.shl(builder.zext(high, i128), ir.Constant(i128, 64)))
+
+        state = builder.add(builder.mul(wide(lo, hi), ir.Constant(i128, PCG64_MULTIPLIER)), wide(inc_lo, inc_hi))
+        new_lo = builder.trunc(state, i64)
+        new_hi = builder.trunc(builder.lshr(state, ir.Constant(i128, 64)), i64)
+        builder.store(new_lo, slots[0])
+        builder.store(new_hi, slots[1])
+        word = builder.xor(new_hi, new_lo)
+        rot = builder.lshr(new_hi, ir.Constant(i64, 58))
+        back = builder.and_(builder.neg(rot), ir.Constant(i64, 63))
+        return builder.or_(builder.lshr(word, rot), builder.shl(word, back))
+
+    return sig, codegen
+
+
+@nb.njit(cache=True, inline="always")
+def pcg64_double(w):
+    """numpy's next_double: the top 53 bits of a word times 2^-53."""
+    return np.float64(_pcg64_next(w) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@nb.njit(cache=True)
+def _pcg64_normal_slow(w, idx, rabs, x):
+    """numpy's ziggurat beyond the rectangle test: the tail (layer 0) or the wedge, then new words."""
+    while True:
+        if idx == 0:
+            while True:
+                xx = -ziggurat_nor_inv_r * np.log1p(-pcg64_double(w))
+                yy = -np.log1p(-pcg64_double(w))
+                if yy + yy > xx * xx:
+                    return -(ziggurat_nor_r + xx) if (rabs >> np.uint64(8)) & np.uint64(1) else ziggurat_nor_r + xx
+        elif (fi_double[idx - 1] - fi_double[idx]) * pcg64_double(w) + fi_double[idx] < np.exp(-0.5 * x * x):
+            return x
+        r = _pcg64_next(w)
+        idx = np.intp(r & np.uint64(0xFF))
+        r >>= np.uint64(8)
+        rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
+        x = np.float64(rabs) * wi_double[idx]
+        if r & np.uint64(1):
+            x = -x
+        if rabs < ki_double[idx]:
+            return x
+
+
+@nb.njit(cache=True, inline="always")
+def pcg64_standard_normal(w):
+    """numpy's standard normal (random_standard_normal) on the PCG64 words ``w``; the fast
+    path (one word, one table compare) inline."""
+    r = _pcg64_next(w)
+    idx = np.intp(r & np.uint64(0xFF))
+    r >>= np.uint64(8)
+    rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
+    x = np.float64(rabs) * wi_double[idx]
+    if r & np.uint64(1):
+        x = -x
+    if rabs < ki_double[idx]:
+        return x
+    return _pcg64_normal_slow(w, idx, rabs, x)
+
+
+def _pcg64_words_address(generator: np.random.Generator) -> int | None:
+    """Address of the PCG64 state and increment words of ``generator``, or None if it is not a
+    PCG64 with the native 128-bit layout (checked against the state numpy reports)."""
+    import ctypes
+
+    bitgen = generator.bit_generator
+    if type(bitgen) is not np.random.PCG64:
+        return None
+    pcg = ctypes.c_void_p.from_address(bitgen.ctypes.state.value).value  # pcg64_state.pcg_state
+    words = (ctypes.c_uint64 * 4).from_address(pcg)
+    state = bitgen.state["state"]
+    if (words[0] | words[1] << 64, words[2] | words[3] << 64) != (state["state"], state["inc"]):
+        return None
+    return pcg
+
+
+class Pcg64Stream:
+    """A numpy Generator on PCG64, as the jitted loops draw from it: ``standard_normal()``,
+    ``random()``, ``uniform(low, high)`` and ``normal(loc, scale)`` give exactly the numbers
+    the Generator would, and advance its state. Holds the Generator (whose memory it uses)."""
+
+    def __init__(self, generator: np.random.Generator):
+        address = _pcg64_words_address(generator)
+        if address is None:
+            raise ValueError("Pcg64Stream needs a numpy Generator on PCG64")
+        self.generator = generator
+        self._address = address
+
+
+class Pcg64StreamType(types.Type):
+    def __init__(self):
+        super().__init__(name="Pcg64Stream")
+
+
+pcg64_stream_type = Pcg64StreamType()
+
+
+@typeof_impl.register(Pcg64Stream)
+def _typeof_pcg64_stream(val, c):
+    return pcg64_stream_type
+
+
+@register_model(Pcg64StreamType)
+class _Pcg64StreamModel(models.StructModel):
+    def __init__(self, dmm, fe_type):
+        super().__init__(dmm, fe_type, [("state", _STATE_POINTER)])
+
+
+make_attribute_wrapper(Pcg64StreamType, "state", "state")
+
+
+@unbox(Pcg64StreamType)
+def _unbox_pcg64_stream(typ, obj, c):
+    """As a FastRng: a borrowed pointer to the Generator's PCG64 words."""
+    addr_obj = c.pyapi.object_getattr_string(obj, "_address")
+    addr = c.pyapi.long_as_voidptr(addr_obj)
+    c.pyapi.decref(addr_obj)
+    rng = cgutils.create_struct_proxy(typ)(c.context, c.builder)
+    rng.state = c.builder.bitcast(addr, c.context.get_value_type(_STATE_POINTER))
+    return NativeValue(rng._getvalue(), is_error=cgutils.is_not_null(c.builder, c.pyapi.err_occurred()))
+
+
+@overload_method(Pcg64StreamType, "standard_normal")
+def _ol_pcg_standard_normal(rng):
+    def impl(rng):
+        return pcg64_standard_normal(rng.state)
+    return impl
+
+
+@overload_method(Pcg64StreamType, "random")
+def _ol_pcg_random(rng):
+    def impl(rng):
+        return pcg64_double(rng.state)
+    return impl
+
+
+@overload_method(Pcg64StreamType, "uniform")
+def _ol_pcg_uniform(rng, low=0.0, high=1.0):
+    def impl(rng, low=0.0, high=1.0):
+        scaled = (high - low) * pcg64_double(rng.state)
+        return low + scaled
+    return impl
+
+
+@overload_method(Pcg64StreamType, "normal")
+def _ol_pcg_normal(rng, loc=0.0, scale=1.0):
+    def impl(rng, loc=0.0, scale=1.0):
+        scaled = scale * pcg64_standard_normal(rng.state)
+        return loc + scaled
+    return impl
+
+
 def resampling_draws(rng, systematic, m):
     """How many uniforms a resampling step draws: M with a numpy Generator (today's stream,
     whatever the scheme), 1 with a FastRng when the scheme is systematic (it reads only one)."""
@@ -293,10 +469,11 @@ def _ol_resampling_draws(rng, systematic, m):
 
 
 def loop_rng(rng: np.random.Generator, random_numbers: str):
-    """The generator a jitted loop is given: ``rng`` itself, or for ``fast`` a
+    """The generator a jitted loop is given: for ``numpy``, ``rng``'s own stream (a
+    :class:`Pcg64Stream` on it, or ``rng`` itself if it is not on PCG64); for ``fast`` a
     :class:`FastRng` seeded from ``rng``'s SeedSequence (its own stream)."""
     if random_numbers == "numpy":
-        return rng
+        return Pcg64Stream(rng) if _pcg64_words_address(rng) is not None else rng
     if random_numbers == "fast":
         return FastRng.from_seed(rng.bit_generator.seed_seq)
     raise ValueError(f"unknown random_numbers {random_numbers!r}")
