@@ -91,7 +91,10 @@ def _mid_run_state(particles: int):
     x0[:, 5] = nav.yaw[upd[k]] + rng.normal(0, 0.1, particles)
     x0[:, 6:] = rng.normal(0, 1e-4, (particles, 2))
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    from tanbench.methods.tight import likelihood_bundle
+
     return dict(k=k, x0=x0, inc=inc, nav=nav, upd=upd, zargs=ctx.nmap.kernel_args(),
+                lik=likelihood_bundle(scenario.filter, ctx.nmap),
                 ranges=np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows[k + 1]]),
                 beams=np.ascontiguousarray(obs.dvl_beams), noise=rng.standard_normal((particles, 6)),
                 uni=rng.random(particles))
@@ -103,7 +106,11 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
     import numba as nb
 
     from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
-    from tanbench.filters.likelihood import loglik_loose, loglik_loose_numpy, loglik_tight, loglik_tight_numpy
+    from tanbench.filters.likelihood import (loglik_loose, loglik_loose_numpy, loglik_tight, loglik_tight_mapaware_stacked,
+                                            loglik_tight_numpy)
+    from tanbench.filters.params import Readings, TightModel
+    from tanbench.filters.rng import loop_rng
+    from tanbench.filters.tight import propagate_and_weigh
     from tanbench.filters.propagate import (propagate_loose, propagate_loose_numpy, propagate_tight,
                                             propagate_tight_numpy)
     from tanbench.filters.resample import (REG_LIU_WEST, SYSTEMATIC, apply_resample, effective_sample_size,
@@ -130,7 +137,11 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
         return round(_best(fn, reps)[0] / m * 1e9, 1)
 
     out = {"tight-dvl": {}, "loose-dvl": {}}
-    for name, gen in (("numpy", np.random.default_rng(7)), ("fast", FastRng.from_seed(np.random.SeedSequence(7)))):
+    from tanbench.filters.rng import Pcg64Stream
+
+    for name, gen in (("numpy Generator", np.random.default_rng(7)),
+                      ("numpy, inline PCG64 as the loops draw", Pcg64Stream(np.random.default_rng(7))),
+                      ("fast", FastRng.from_seed(np.random.SeedSequence(7)))):
         out["tight-dvl"][f"random normals x6 ({name})"] = per(lambda: _draw_normals(gen, noise))
         out["tight-dvl"][f"random uniform x1 ({name})"] = per(lambda: _draw_uniforms(gen, s["uni"].copy()))
     t = out["tight-dvl"]
@@ -138,6 +149,20 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
     x[:] = x0
     t["likelihood (4 beams)"] = per(lambda: loglik_tight(x, s["beams"], s["ranges"], *z, 1.0, 5.0, dist, 0.1,
                                                          *ref, ll))
+    zz = s["lik"].grids
+    t["likelihood map-aware Student-t (4 beams)"] = per(lambda: loglik_tight_mapaware_stacked(
+        x, s["beams"], s["ranges"], zz, *z[1:], 1.0, 5.0, dist, 0.1, *ref, s["lik"].kind, s["lik"].nu, ll))
+    model = TightModel(sig[0], sig[1], sig[2], 1, 0.1, 1.0, 5.0)
+    readings = Readings(0, 1.0, 0.0, True, 0.0)
+    stream = loop_rng(np.random.default_rng(9), "numpy")
+
+    def fused():
+        x[:] = x0
+        propagate_and_weigh(x, stream, True, s["inc"][k], nav.yaw[upd[k]], np.zeros(4), readings, model, s["beams"],
+                            s["ranges"], z, s["lik"], *ref, ll)
+
+    t["fused pass: 6 normals + propagate + map-aware likelihood (incl. copy)"] = per(fused)
+    x[:] = x0
     t["normalise"] = per(lambda: normalize_log_weights(ll, w))
     t["estimate"] = per(lambda: weighted_estimate(x, w, 5, 0.0, mean, v, cov))
     t["ess"] = per(lambda: effective_sample_size(w))

@@ -12,7 +12,6 @@ and the map-aware likelihood's log-of-products stays finite with hundreds of bea
 
 from __future__ import annotations
 
-import math
 
 import numba as nb
 import numpy as np
