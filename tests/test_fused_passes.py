@@ -207,6 +207,9 @@ def test_pcg64_stream_is_numpys_stream():
     assert np.array_equal(a, b)
     assert g.bit_generator.state == h.bit_generator.state
     assert np.array_equal(g.standard_normal(5), h.standard_normal(5))
+    # plain-Python draws (set-up code) come from the same Generator
+    assert np.array_equal(stream.normal(1.0, 2.0, 4), g.normal(1.0, 2.0, 4))
+    assert stream.uniform(-1.0, 1.0) == g.uniform(-1.0, 1.0)
 
 
 def test_other_bit_generators_are_drawn_from_as_they_are():

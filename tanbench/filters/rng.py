@@ -391,6 +391,24 @@ class Pcg64Stream:
         self.generator = generator
         self._address = address
 
+    @property
+    def bit_generator(self):
+        """The Generator's bit generator (its seed sequence, its state)."""
+        return self.generator.bit_generator
+
+    # plain-Python use (set-up code): the Generator itself, on the same state
+    def standard_normal(self, size: int | None = None):
+        return self.generator.standard_normal(size)
+
+    def random(self, size: int | None = None):
+        return self.generator.random(size)
+
+    def uniform(self, low: float = 0.0, high: float = 1.0, size: int | None = None):
+        return self.generator.uniform(low, high, size)
+
+    def normal(self, loc: float = 0.0, scale: float = 1.0, size: int | None = None):
+        return self.generator.normal(loc, scale, size)
+
 
 class Pcg64StreamType(types.Type):
     def __init__(self):
