@@ -77,10 +77,21 @@ def cli(*args, timeout: float = 300, extra_path: Path | None = None, cwd=None) -
                           cwd=cwd or ROOT)
 
 
+def _default_sigint() -> None:
+    """In the child before exec: Ctrl-C's default action, as a command started from a terminal has.
+
+    A shell without job control starts background commands with SIGINT ignored, and the
+    ignoring is inherited (pytest, then the CLI); the CLI would then never see the test's
+    Ctrl-C. Restoring the default makes the test check tanbench, not how pytest was started.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_cli(*args, stdout=None, stderr=None) -> subprocess.Popen:
     """Start ``python -m tanbench.cli ARGS`` in its own process group (to signal it and its workers)."""
     cmd = [sys.executable, "-m", "tanbench.cli", *[str(a) for a in args]]
     return subprocess.Popen(cmd, env=cli_env(), cwd=ROOT, start_new_session=True, text=True,
+                            preexec_fn=_default_sigint,
                             stdout=stdout or subprocess.PIPE, stderr=stderr or subprocess.PIPE)
 
 
