@@ -237,14 +237,10 @@ class _FastRngModel(models.StructModel):
         super().__init__(dmm, fe_type, [("state", _STATE_POINTER)])
 
 
-make_attribute_wrapper(FastRngType, "state", "state")
-
-
-@unbox(FastRngType)
-def _unbox_fast_rng(typ, obj, c):
-    """A FastRng's native form is a pointer to its state array's words, borrowed for the call
-    (the Python object keeps the array alive; draws advance it). A pointer, not an array,
-    so a draw costs no reference counting."""
+def _unbox_state_words(typ, obj, c):
+    """A stream's native form is a pointer to its state words (``obj._address``), borrowed for
+    the call (the Python object keeps the memory alive; draws advance it). A pointer, not an
+    array, so a draw costs no reference counting."""
     addr_obj = c.pyapi.object_getattr_string(obj, "_address")
     addr = c.pyapi.long_as_voidptr(addr_obj)
     c.pyapi.decref(addr_obj)
@@ -253,32 +249,41 @@ def _unbox_fast_rng(typ, obj, c):
     return NativeValue(rng._getvalue(), is_error=cgutils.is_not_null(c.builder, c.pyapi.err_occurred()))
 
 
-@overload_method(FastRngType, "standard_normal")
-def _ol_standard_normal(rng):
-    def impl(rng):
-        return standard_normal(rng.state)
-    return impl
+def _register_draws(stream_type, draw_normal, draw_double) -> None:
+    """Give ``stream_type`` (a numba type holding ``state``, a pointer to its words) the
+    methods the loops call on a numpy Generator, drawing with ``draw_normal(words)`` and
+    ``draw_double(words)``; its Python objects unbox by :func:`_unbox_state_words`."""
+    make_attribute_wrapper(stream_type, "state", "state")
+    unbox(stream_type)(_unbox_state_words)
+
+    @overload_method(stream_type, "standard_normal")
+    def _ol_standard_normal(rng):
+        def impl(rng):
+            return draw_normal(rng.state)
+        return impl
+
+    @overload_method(stream_type, "random")
+    def _ol_random(rng):
+        def impl(rng):
+            return draw_double(rng.state)
+        return impl
+
+    @overload_method(stream_type, "uniform")
+    def _ol_uniform(rng, low=0.0, high=1.0):
+        def impl(rng, low=0.0, high=1.0):
+            scaled = (high - low) * draw_double(rng.state)
+            return low + scaled
+        return impl
+
+    @overload_method(stream_type, "normal")
+    def _ol_normal(rng, loc=0.0, scale=1.0):
+        def impl(rng, loc=0.0, scale=1.0):
+            scaled = scale * draw_normal(rng.state)
+            return loc + scaled
+        return impl
 
 
-@overload_method(FastRngType, "random")
-def _ol_random(rng):
-    def impl(rng):
-        return uniform01(rng.state)
-    return impl
-
-
-@overload_method(FastRngType, "uniform")
-def _ol_uniform(rng, low=0.0, high=1.0):
-    def impl(rng, low=0.0, high=1.0):
-        return low + (high - low) * uniform01(rng.state)
-    return impl
-
-
-@overload_method(FastRngType, "normal")
-def _ol_normal(rng, loc=0.0, scale=1.0):
-    def impl(rng, loc=0.0, scale=1.0):
-        return loc + scale * standard_normal(rng.state)
-    return impl
+_register_draws(FastRngType, standard_normal, uniform01)
 
 
 # ---- numpy's own stream, drawn inline (``random_numbers: numpy``) -------------------------------
@@ -429,48 +434,7 @@ class _Pcg64StreamModel(models.StructModel):
         super().__init__(dmm, fe_type, [("state", _STATE_POINTER)])
 
 
-make_attribute_wrapper(Pcg64StreamType, "state", "state")
-
-
-@unbox(Pcg64StreamType)
-def _unbox_pcg64_stream(typ, obj, c):
-    """As a FastRng: a borrowed pointer to the Generator's PCG64 words."""
-    addr_obj = c.pyapi.object_getattr_string(obj, "_address")
-    addr = c.pyapi.long_as_voidptr(addr_obj)
-    c.pyapi.decref(addr_obj)
-    rng = cgutils.create_struct_proxy(typ)(c.context, c.builder)
-    rng.state = c.builder.bitcast(addr, c.context.get_value_type(_STATE_POINTER))
-    return NativeValue(rng._getvalue(), is_error=cgutils.is_not_null(c.builder, c.pyapi.err_occurred()))
-
-
-@overload_method(Pcg64StreamType, "standard_normal")
-def _ol_pcg_standard_normal(rng):
-    def impl(rng):
-        return pcg64_standard_normal(rng.state)
-    return impl
-
-
-@overload_method(Pcg64StreamType, "random")
-def _ol_pcg_random(rng):
-    def impl(rng):
-        return pcg64_double(rng.state)
-    return impl
-
-
-@overload_method(Pcg64StreamType, "uniform")
-def _ol_pcg_uniform(rng, low=0.0, high=1.0):
-    def impl(rng, low=0.0, high=1.0):
-        scaled = (high - low) * pcg64_double(rng.state)
-        return low + scaled
-    return impl
-
-
-@overload_method(Pcg64StreamType, "normal")
-def _ol_pcg_normal(rng, loc=0.0, scale=1.0):
-    def impl(rng, loc=0.0, scale=1.0):
-        scaled = scale * pcg64_standard_normal(rng.state)
-        return loc + scaled
-    return impl
+_register_draws(Pcg64StreamType, pcg64_standard_normal, pcg64_double)
 
 
 def resampling_draws(rng, systematic, m):
