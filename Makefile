@@ -24,9 +24,10 @@ run: $(VENV)/.installed-run
 	$(TB) run configs/quick.yaml
 	@echo "tanbench is installed in $(VENV): 'source $(VENV)/bin/activate' puts it on PATH (or type $(TB))"
 
-## test: the test suite, then the CI regression sweep checked against the committed baseline
+## test: the test suite (spread over the machine's cores by pytest-xdist), then the CI regression sweep checked
+## against the committed baseline
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto
 	$(TB) run configs/ci.yaml --out results/ci --force --quiet
 	$(TB) check results/ci results/ci-baseline --report results/ci/check.md
 
