@@ -43,15 +43,16 @@ def world():
     return vehicle, nmap, map_variance_grid(nmap, 0.2887, 0.4)
 
 
-def _tight_cloud(rng, nav, k, m):
-    """A cloud around the navigation solution, some particles near and off the map edge."""
+def _tight_cloud(rng, nav, k, m, yaw_off=0.0):
+    """A cloud around the navigation solution (its heading ``yaw_off`` from the navigation's),
+    some particles near and off the map edge."""
     x = np.empty((m, N_TIGHT))
     x[:, E] = nav.pos[k, 0] + rng.uniform(-300, 300, m)
     x[:, N] = nav.pos[k, 1] + rng.uniform(-300, 300, m)
     x[:, U] = nav.pos[k, 2] + rng.normal(0, 0.5, m)
     x[:, PITCH] = nav.pitch[k] + rng.normal(0, 0.02, m)
     x[:, ROLL] = nav.roll[k] + rng.normal(0, 0.02, m)
-    x[:, YAW] = nav.yaw[k] + rng.normal(0, 0.5, m)  # beyond the small-angle range too
+    x[:, YAW] = nav.yaw[k] + yaw_off + rng.normal(0, 0.5, m)  # beyond the small-angle range too
     x[:, BX] = rng.normal(0, 1e-4, m)
     x[:, BZ] = rng.normal(0, 1e-4, m)
     return x
@@ -61,10 +62,11 @@ LIKELIHOODS = {"plain": (False, "gaussian"), "mapaware-gaussian": (True, "gaussi
                "mapaware-student": (True, "student-t")}
 
 
+@pytest.mark.parametrize("yaw_off", [0.0, 0.52], ids=["cloud-on-navigation-heading", "cloud-30-deg-off"])
 @pytest.mark.parametrize("propagation", ["exact", "euler-last-second"])
 @pytest.mark.parametrize("likelihood", sorted(LIKELIHOODS))
 @pytest.mark.parametrize("dist_mode", [prop.DIST_PARTICLE, prop.DIST_NAVIGATION], ids=["particle", "navigation"])
-def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, dist_mode):
+def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, dist_mode, yaw_off):
     vehicle, nmap, mvar = world
     obs, nav = vehicle.obs, vehicle.obs.nav
     upd = obs.ping_idx
@@ -78,11 +80,12 @@ def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, d
     m = 513
     for row in (0, len(inc) // 3, len(inc) // 2):
         k = upd[row]
-        x0 = _tight_cloud(rng, nav, k, m)
+        x0 = _tight_cloud(rng, nav, k, m, yaw_off)
         ranges = obs.dvl_ranges[row + 1].copy()
         ranges[rng.integers(0, ranges.size)] = np.nan  # a beam without a range
         euler_in = np.array([1.2, 0.05, 0.01, -0.02])
-        ref = (nav.pitch[upd[row + 1]], nav.roll[upd[row + 1]], nav.yaw[upd[row + 1]])
+        ref = (nav.pitch[upd[row + 1]], nav.roll[upd[row + 1]], nav.yaw[upd[row + 1]] + yaw_off)
+        start = (nav.pitch[k], nav.roll[k])
         seed = int(rng.integers(2**32))
 
         # separate passes: the noise array first, then the array kernels
@@ -90,9 +93,10 @@ def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, d
         noise = gen.standard_normal((m, 6))
         x, dist, ll = x0.copy(), np.empty((m, 2)), np.empty(m)
         if readings.propagation:
-            prop.propagate_tight_euler(x, euler_in, readings.dt, inc[row], noise, *model[:4], dist)
+            prop.propagate_tight_euler(x, euler_in, readings.dt, inc[row], noise, *model[:4], dist, *start,
+                                       nav.yaw[k] + yaw_off)
         else:
-            prop.propagate_tight(x, inc[row], nav.yaw[k], noise, *model[:4], dist)
+            prop.propagate_tight(x, inc[row], nav.yaw[k], noise, *model[:4], dist, yaw_off)
         if mapaware:
             best = lik.loglik_tight_mapaware(x, obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0, dist, 0.1,
                                              *ref, LIKELIHOOD[kind], 4.0, ll)
@@ -102,7 +106,8 @@ def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, d
         # the fused pass, drawing from the same stream
         fused_gen = np.random.default_rng(seed)
         xf, llf = x0.copy(), np.empty(m)
-        best_f = propagate_and_weigh(xf, loop_rng(fused_gen, "numpy"), True, inc[row], nav.yaw[k], euler_in,
+        best_f = propagate_and_weigh(xf, loop_rng(fused_gen, "numpy"), True, inc[row], nav.yaw[k], yaw_off, *start,
+                                     euler_in,
                                      readings, model, np.ascontiguousarray(obs.dvl_beams), ranges, za, bundle,
                                      *ref, llf)
         assert np.array_equal(xf, x)
@@ -112,7 +117,8 @@ def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, d
 
         # no propagation (update 0): the cloud is left alone and weighed with zero innovations
         xs, lls = x0.copy(), np.empty(m)
-        best_s = propagate_and_weigh(xs, loop_rng(fused_gen, "numpy"), False, inc[row], nav.yaw[k], euler_in,
+        best_s = propagate_and_weigh(xs, loop_rng(fused_gen, "numpy"), False, inc[row], nav.yaw[k], yaw_off, *start,
+                                     euler_in,
                                      readings, model, np.ascontiguousarray(obs.dvl_beams), ranges, za, bundle,
                                      *ref, lls)
         assert np.array_equal(xs, x0)

@@ -23,7 +23,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import sin_cos_about
+from tanbench.filters.trig import attitude_reference, particle_sin_cos
 from tanbench.options import LIKELIHOOD
 from tanbench.terrain.grid import bilinear, bilinear_numpy, bilinear_pair, stack_grids
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -43,19 +43,9 @@ def beam_constants(sig_u, sig_d, outside_sigma):
 
 
 @nb.njit(cache=True, inline="always")
-def attitude_reference(ref_pitch, ref_roll, ref_yaw):
-    """The navigation attitude and its sines and cosines, as the per-particle kernels take it."""
-    return (ref_pitch, math.sin(ref_pitch), math.cos(ref_pitch), ref_roll, math.sin(ref_roll), math.cos(ref_roll),
-            ref_yaw, math.sin(ref_yaw), math.cos(ref_yaw))
-
-
-@nb.njit(cache=True, inline="always")
 def _particle_dcm(x, j, att):
     """C_b^n of particle ``j``'s attitude, each angle as the reference ``att`` plus an offset."""
-    ref_pitch, s_pitch, c_pitch, ref_roll, s_roll, c_roll, ref_yaw, s_yaw, c_yaw = att
-    st, ct = sin_cos_about(s_pitch, c_pitch, x[j, PITCH] - ref_pitch)
-    sg, cg = sin_cos_about(s_roll, c_roll, x[j, ROLL] - ref_roll)
-    sp, cp = sin_cos_about(s_yaw, c_yaw, x[j, YAW] - ref_yaw)
+    st, ct, sg, cg, sp, cp = particle_sin_cos(x, j, att)
     return (cg * cp - st * sg * sp, -ct * sp, sg * cp + st * cg * sp,
             cg * sp + st * sg * cp, ct * cp, sg * sp - st * cg * cp,
             -ct * sg, st, ct * cg)
@@ -231,15 +221,16 @@ PRODUCT_LOG_AT = 1e150
 
 
 @nb.njit(cache=True, inline="always")
-def _beam_terms_add(acc, d2, v, inv_u2, kind, nu):
-    """Add one beam (squared innovation ``d2``, variance ``v``) to the density accumulator
-    ``acc`` = (log sum, normaliser product, Student-t product, Gaussian quadratic sum)."""
+def _beam_terms_add(acc, q, v, inv_u2, kind, nu):
+    """Add one beam (normalised squared innovation ``q`` = d^2 / v, variance ``v``) to the
+    density accumulator ``acc`` = (log sum, normaliser product, Student-t product, Gaussian
+    quadratic sum). The caller divides once and adds the same ``q`` to its chi^2."""
     logs, norm, student, quad = acc
     norm *= v * inv_u2
     if kind == LIK_STUDENT:
-        student *= 1.0 + d2 / (nu * v)
+        student *= 1.0 + q * (1.0 / nu)
     else:
-        quad += -0.5 * d2 / v
+        quad += -0.5 * q
     if norm > PRODUCT_LOG_AT:
         logs += -0.5 * math.log(norm)
         norm = 1.0
@@ -284,11 +275,11 @@ def loglik_tight_mapaware_particle(x, j, vec, zv, e0, n0, inv_re, inv_rn, su2, i
         h, mv = bilinear_pair(zv, e0, n0, inv_re, inv_rn, pe, pn)
         if h == h and mv == mv:
             v = su2 + mv
-            d2 = (pu - h) * (pu - h)
-            acc = _beam_terms_add(acc, d2, v, inv_u2, kind, nu)
-            chi += d2 / v
+            q = (pu - h) * (pu - h) / v
+            acc = _beam_terms_add(acc, q, v, inv_u2, kind, nu)
+            chi += q
         else:
-            acc = _beam_terms_add(acc, out2 * su2, su2, inv_u2, kind, nu)
+            acc = _beam_terms_add(acc, out2, su2, inv_u2, kind, nu)
             chi += out2
     return _beam_terms_total(acc, kind, nu) - 0.5 * (dist_e ** 2 + dist_n ** 2) * inv_d2, chi
 
@@ -360,10 +351,11 @@ def loglik_loose_mapaware_particle(x, j, offsets, up, zv, e0, n0, inv_re, inv_rn
         if h == h and mv == mv:
             v = su2 + mv
             d = up + offsets[i, 2] - h
-            acc = _beam_terms_add(acc, d * d, v, inv_u2, kind, nu)
-            chi += d * d / v
+            q = d * d / v
+            acc = _beam_terms_add(acc, q, v, inv_u2, kind, nu)
+            chi += q
         else:
-            acc = _beam_terms_add(acc, out2 * su2, su2, inv_u2, kind, nu)
+            acc = _beam_terms_add(acc, out2, su2, inv_u2, kind, nu)
             chi += out2
     return _beam_terms_total(acc, kind, nu), chi
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import sin_cos
+from tanbench.filters.trig import attitude_reference, particle_sin_cos, sin_cos_about
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, EU_VX, EU_VY, EU_WX, EU_WZ,
                                             JAXE, JAXN, JAZE, JAZN, SX, SZ)
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -40,17 +40,23 @@ DIST_NONE, DIST_PARTICLE, DIST_NAVIGATION = (DISTANCE_INNOVATION[k] for k in ("n
 
 
 @nb.njit(cache=True, inline="always")
-def propagate_tight_particle(x, j, inc, yaw_nav0, n_e, n_n, n_u, n_pitch, n_roll, n_yaw, sig_pos, sig_up, sig_att,
-                             dist_mode):
+def propagate_tight_particle(x, j, inc, yaw_nav0, yaw_off, s_off, c_off, n_e, n_n, n_u, n_pitch, n_roll, n_yaw,
+                             sig_pos, sig_up, sig_att, dist_mode):
     """Move particle ``j`` of ``x`` as :func:`propagate_tight` does, with its six standard
     normals ``n_*``; returns its distance innovations (east, north).
+
+    The particle's heading offset from the navigation, ``x[j, YAW] - yaw_nav0``, is rotated
+    about ``yaw_off`` (the cloud's offset, with its sine ``s_off`` and cosine ``c_off``), so
+    that its sine and cosine come from the short series of ``trig.sin_cos`` also when the
+    navigation heading is far off (``yaw_off`` = 0, ``s_off`` = 0, ``c_off`` = 1: about the
+    navigation heading itself, exactly).
 
     The ``*_particle`` functions are inlined into their callers and take the callers'
     floating-point flags: call them from ``fastmath=FASTMATH`` kernels only (the array
     kernels here and the filter loops' fused passes)."""
     bx = x[j, BX]
     bz = x[j, BZ]
-    s, c = sin_cos(x[j, YAW] - yaw_nav0)
+    s, c = sin_cos_about(s_off, c_off, (x[j, YAW] - yaw_nav0) - yaw_off)
     ue = inc[D0E] + bx * inc[JAXE] - bz * inc[JAZE]
     un = inc[D0N] + bx * inc[JAXN] - bz * inc[JAZN]
     de = c * ue - s * un
@@ -69,7 +75,7 @@ def propagate_tight_particle(x, j, inc, yaw_nav0, n_e, n_n, n_u, n_pitch, n_roll
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov):
+def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off=0.0):
     """Move particles ``x`` (M, 8) over one interval; fill ``dist_innov`` (M, 2).
 
     ``sig_pos`` is the east/north noise per update (for ``DIST_PARTICLE`` the caller
@@ -77,11 +83,14 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
 
     ``inc`` is one row of the increments table, ``yaw_nav0`` the navigation yaw at the
     interval start, ``noise`` (M, 6) standard normals for E, N, U, pitch, roll, yaw.
+    ``yaw_off`` (rad) is only where the trigonometry is centred (the cloud's heading offset
+    from the navigation; :func:`propagate_tight_particle`): it does not change the motion.
     """
+    s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
     for j in range(x.shape[0]):
         dist_innov[j, 0], dist_innov[j, 1] = propagate_tight_particle(
-            x, j, inc, yaw_nav0, noise[j, 0], noise[j, 1], noise[j, 2], noise[j, 3], noise[j, 4], noise[j, 5],
-            sig_pos, sig_up, sig_att, dist_mode)
+            x, j, inc, yaw_nav0, yaw_off, s_off, c_off, noise[j, 0], noise[j, 1], noise[j, 2], noise[j, 3],
+            noise[j, 4], noise[j, 5], sig_pos, sig_up, sig_att, dist_mode)
 
 
 def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode):
@@ -107,17 +116,16 @@ def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dis
 
 
 @nb.njit(cache=True, inline="always")
-def propagate_tight_euler_particle(x, j, u, dt, inc, n_e, n_n, n_u, n_pitch, n_roll, n_yaw, sig_pos, sig_up,
+def propagate_tight_euler_particle(x, j, u, dt, inc, att0, n_e, n_n, n_u, n_pitch, n_roll, n_yaw, sig_pos, sig_up,
                                    sig_att, dist_mode):
     """Move particle ``j`` as :func:`propagate_tight_euler` does, with its six standard normals;
-    returns its distance innovations (east, north)."""
+    returns its distance innovations (east, north). Its attitude's sines and cosines are taken
+    about the reference ``att0`` (``trig.attitude_reference``; only where the series is centred)."""
     vx = u[EU_VX]
     vy = u[EU_VY]
     wx = u[EU_WX]
     wz = u[EU_WZ]
-    st, ct = math.sin(x[j, PITCH]), math.cos(x[j, PITCH])
-    sg, cg = math.sin(x[j, ROLL]), math.cos(x[j, ROLL])
-    sp, cp = math.sin(x[j, YAW]), math.cos(x[j, YAW])
+    st, ct, sg, cg, sp, cp = particle_sin_cos(x, j, att0)
     de = ((cg * cp - st * sg * sp) * vx - ct * sp * vy) * dt
     dn = ((cg * sp + st * sg * cp) * vx + ct * cp * vy) * dt
     yaw_rate = (-sg * (wx - x[j, BX]) + cg * (wz - x[j, BZ])) / ct
@@ -135,7 +143,8 @@ def propagate_tight_euler_particle(x, j, u, dt, inc, n_e, n_n, n_u, n_pitch, n_r
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov):
+def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, ref_pitch=0.0,
+                          ref_roll=0.0, ref_yaw=0.0):
     """Eq. 1 read as one Euler step of length ``dt`` (the sampling time), Algorithm 1 line 4.
 
     ``u`` = (v_x, v_y, w_x, w_z): the DVL body velocity and body turn rates
@@ -145,10 +154,13 @@ def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_m
     cos th_j * dt``; up, pitch and roll follow the navigation system (``inc``: Eq. 1's 0_3,
     as in :func:`propagate_tight`). Noise and distance innovations as there; the
     navigation distance of ``DIST_NAVIGATION`` is the navigation system's displacement.
+    ``ref_*`` (rad) only centre the trigonometry (``trig.particle_sin_cos``): the navigation
+    attitude at the interval start, or the cloud's; they do not change the motion.
     """
+    att0 = attitude_reference(ref_pitch, ref_roll, ref_yaw)
     for j in range(x.shape[0]):
         dist_innov[j, 0], dist_innov[j, 1] = propagate_tight_euler_particle(
-            x, j, u, dt, inc, noise[j, 0], noise[j, 1], noise[j, 2], noise[j, 3], noise[j, 4], noise[j, 5],
+            x, j, u, dt, inc, att0, noise[j, 0], noise[j, 1], noise[j, 2], noise[j, 3], noise[j, 4], noise[j, 5],
             sig_pos, sig_up, sig_att, dist_mode)
 
 

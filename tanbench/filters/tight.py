@@ -38,11 +38,12 @@ import numpy as np
 from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters import FASTMATH
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (attitude_reference, beam_constants, beam_vectors, loglik_tight_mapaware_particle,
+from tanbench.filters.likelihood import (beam_constants, beam_vectors, loglik_tight_mapaware_particle,
                                         loglik_tight_particle)
 from tanbench.filters.propagate import propagate_tight_euler_particle, propagate_tight_particle
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
+from tanbench.filters.trig import attitude_reference
 
 REGULARISED_STATES = {
     "position-heading-biases": np.array([E, N, YAW, BX, BZ], dtype=np.int64),
@@ -69,8 +70,8 @@ def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
-def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, euler_in, readings, model, beams, ranges, zmap, lik,
-                        ref_pitch, ref_roll, ref_yaw, ll):
+def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, yaw_off, start_pitch, start_roll, euler_in, readings, model,
+                        beams, ranges, zmap, lik, ref_pitch, ref_roll, ref_yaw, ll):
     """One pass over the particles of a tight update: for each particle, draw its six
     propagation normals (E, N, U, pitch, roll, yaw: the same numbers in the same order as
     filling an (M, 6) array row by row), move it (if ``propagate``: ``propagate_tight``, or
@@ -81,10 +82,21 @@ def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, euler_in, readings, mo
     The per-particle arithmetic is the array kernels' (their ``*_particle`` functions, under
     the same flags); the log-weights are accumulated outside (``resample.add_log_weights``),
     where no reassociation reaches them.
+
+    The particles' sines and cosines are taken about references near them (``trig``; they
+    only decide where the short series is used): the propagation about the navigation
+    heading at the interval start plus ``yaw_off``, the cloud's heading offset from the
+    navigation at the last update (and, for the Euler step, about the navigation pitch and
+    roll there, ``start_*``); the beams about ``ref_*``, which the loop sets to the
+    navigation attitude with the yaw moved by the same offset. With a navigation heading
+    off by tens of degrees, as the paper's 30 degree initial error, the offset keeps the
+    particles within the series' range instead of calling ``math.sin`` and ``math.cos``.
     """
     z, e0, n0, inv_re, inv_rn = zmap
     su2, inv_u2, inv_d2, outside_sq, out2 = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
     att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
+    att0 = attitude_reference(start_pitch, start_roll, yaw_nav0 + yaw_off)
+    s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
     vec = beam_vectors(beams, ranges)
     used = vec.shape[0]
     euler = readings.propagation != 0
@@ -100,12 +112,13 @@ def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, euler_in, readings, mo
             n_roll = rng.standard_normal()
             n_yaw = rng.standard_normal()
             if euler:
-                dist_e, dist_n = propagate_tight_euler_particle(x, j, euler_in, readings.dt, inc, n_e, n_n, n_u,
-                                                                n_pitch, n_roll, n_yaw, model.sig_pos, model.sig_up,
-                                                                model.sig_att, model.dist_mode)
+                dist_e, dist_n = propagate_tight_euler_particle(x, j, euler_in, readings.dt, inc, att0, n_e, n_n,
+                                                                n_u, n_pitch, n_roll, n_yaw, model.sig_pos,
+                                                                model.sig_up, model.sig_att, model.dist_mode)
             else:
-                dist_e, dist_n = propagate_tight_particle(x, j, inc, yaw_nav0, n_e, n_n, n_u, n_pitch, n_roll, n_yaw,
-                                                          model.sig_pos, model.sig_up, model.sig_att, model.dist_mode)
+                dist_e, dist_n = propagate_tight_particle(x, j, inc, yaw_nav0, yaw_off, s_off, c_off, n_e, n_n, n_u,
+                                                          n_pitch, n_roll, n_yaw, model.sig_pos, model.sig_up,
+                                                          model.sig_att, model.dist_mode)
         if lik.mapaware:
             lj, chi = loglik_tight_mapaware_particle(x, j, vec, lik.grids, e0, n0, inv_re, inv_rn, su2,
                                                      inv_u2, out2, att, lik.kind, lik.nu, dist_e, dist_n, inv_d2)
@@ -152,14 +165,20 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
     no_euler = np.zeros(euler_in.shape[1])
     bad = 0
     locked = False  # the cloud has converged since the last (re)initialisation
+    yaw_off = 0.0  # the cloud's heading offset from the navigation (centres the particles' trigonometry)
     for k in range(steps):
         inc_k = inc[k - 1] if k > 0 else no_inc
         euler_k = euler_in[k - 1] if k > 0 and readings.propagation != 0 else no_euler
-        best = propagate_and_weigh(x, rng, k > 0, inc_k, nav_yaw[max(k - 1, 0)], euler_k, readings, model, beams,
-                                   ranges[k], zmap, lik, nav_pitch[k], nav_roll[k], nav_yaw[k], ll)
+        k0 = max(k - 1, 0)
+        best = propagate_and_weigh(x, rng, k > 0, inc_k, nav_yaw[k0], yaw_off, nav_pitch[k0], nav_roll[k0], euler_k,
+                                   readings, model, beams, ranges[k], zmap, lik, nav_pitch[k], nav_roll[k],
+                                   nav_yaw[k] + yaw_off, ll)
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)
+        yaw_off = mean[YAW] - nav_yaw[k]
+        if not abs(yaw_off) < math.pi:  # NaN, or wrapped: centre on the navigation again
+            yaw_off = 0.0
         spread = math.sqrt(v[E] + v[N])
         off_map = keep_on_map(mean, guard.bounds)
         est[k, :] = mean
@@ -180,6 +199,7 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
             logw[:] = 0.0
             bad = 0
             locked = False
+            yaw_off = 0.0  # the new cloud is drawn about the navigation heading
             reinit_out[k] = 1
             continue
         resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)
