@@ -44,7 +44,8 @@ META_KEY = b"tanbench"
 
 @lru_cache(maxsize=1)
 def _git_revision() -> str:
-    root = Path(__file__).resolve().parents[2]
+    """The checkout's short revision ("-dirty" with uncommitted changes), "" outside a git checkout."""
+    root = Path(__file__).resolve().parents[1]  # the project root (this file is tanbench/store.py)
     try:
         out = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
                              text=True, timeout=5)

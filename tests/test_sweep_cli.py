@@ -10,6 +10,7 @@ import io
 import json
 import re
 import shutil
+import subprocess
 
 import numpy as np
 import pandas as pd
@@ -19,7 +20,7 @@ import yaml
 
 from sweep_support import (
     counted,
-    METHODS, RUN_COLUMNS, TABLE_COLUMNS, assert_same_runs, cli, load_tables, sweep_dict, write_sweep,
+    METHODS, ROOT, RUN_COLUMNS, TABLE_COLUMNS, assert_same_runs, cli, load_tables, sweep_dict, write_sweep,
 )
 from tanbench import results
 from tanbench import store
@@ -94,6 +95,8 @@ def test_provenance_in_every_parquet_schema(base):
     sweep, out, _ = base
     files = [*sorted((out / "runs").glob("*/*.parquet"))[:2], out / "series" / "summary.parquet",
              *sorted((out / "tables").glob("*.parquet"))]
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True).stdout.strip()
     for path in files:
         meta = json.loads(pq.read_schema(path).metadata[b"tanbench"])
         assert PROVENANCE_KEYS <= set(meta), path
@@ -101,6 +104,8 @@ def test_provenance_in_every_parquet_schema(base):
         assert meta["root_seed"] == sweep_dict()["seed"] and meta["sweep"] == "tiny"
         assert meta["numpy_version"] == np.__version__ and meta["numba_version"]
         assert re.match(r"\d{4}-\d\d-\d\dT", meta["created"])
+        if head:  # the code's git revision, from a git checkout (a fresh clone is one)
+            assert meta["git_revision"].split("-")[0] == head, (meta["git_revision"], head)
 
 
 def test_cells_shared_by_tables_run_once(base):
