@@ -44,15 +44,17 @@ META_KEY = b"tanbench"
 
 @lru_cache(maxsize=1)
 def _git_revision() -> str:
-    """The checkout's short revision ("-dirty" with uncommitted changes), "" outside a git checkout."""
+    """The checkout's short revision ("-dirty" with uncommitted changes outside results/), "" outside a
+    git checkout."""
     root = Path(__file__).resolve().parents[1]  # the project root (this file is tanbench/store.py)
     try:
         out = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
                              text=True, timeout=5)
         rev = out.stdout.strip()
         if rev:
-            dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                                   capture_output=True, text=True, timeout=5).stdout.strip()
+            # the code's changes only: a make target rewriting the committed results/ is not one
+            dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no", "--",
+                                    ".", ":(exclude)results"], capture_output=True, text=True, timeout=5).stdout.strip()
             return rev + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         pass
