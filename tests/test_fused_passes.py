@@ -107,9 +107,8 @@ def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, d
         fused_gen = np.random.default_rng(seed)
         xf, llf = x0.copy(), np.empty(m)
         best_f = propagate_and_weigh(xf, loop_rng(fused_gen, "numpy"), True, inc[row], nav.yaw[k], yaw_off, *start,
-                                     euler_in,
-                                     readings, model, np.ascontiguousarray(obs.dvl_beams), ranges, za, bundle,
-                                     *ref, llf)
+                                     euler_in, readings, model, np.ascontiguousarray(obs.dvl_beams), ranges, za,
+                                     bundle, *ref, llf)
         assert np.array_equal(xf, x)
         assert np.array_equal(llf, ll)
         assert best_f == best
@@ -118,9 +117,8 @@ def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, d
         # no propagation (update 0): the cloud is left alone and weighed with zero innovations
         xs, lls = x0.copy(), np.empty(m)
         best_s = propagate_and_weigh(xs, loop_rng(fused_gen, "numpy"), False, inc[row], nav.yaw[k], yaw_off, *start,
-                                     euler_in,
-                                     readings, model, np.ascontiguousarray(obs.dvl_beams), ranges, za, bundle,
-                                     *ref, lls)
+                                     euler_in, readings, model, np.ascontiguousarray(obs.dvl_beams), ranges, za,
+                                     bundle, *ref, lls)
         assert np.array_equal(xs, x0)
         zero = np.zeros((m, 2))
         if mapaware:
@@ -130,6 +128,51 @@ def test_tight_fused_pass_is_the_array_kernels(world, propagation, likelihood, d
             best_z = lik.loglik_tight(x0, obs.dvl_beams, ranges, *za, 1.0, 5.0, zero, 0.1, *ref, ll)
         assert np.array_equal(lls, ll) and best_s == best_z
         assert fused_gen.bit_generator.state == gen.bit_generator.state  # nothing drawn
+
+
+def test_trigonometry_references_change_nothing_but_the_last_bits(world):
+    """A cloud 30 degrees off the navigation heading: centring the particles' sines and cosines on
+    its offset (``yaw_off``, ``ref_yaw``, the Euler step's ``ref_*``) gives the numpy references'
+    motion and likelihood, as centring them on the navigation attitude does."""
+    vehicle, nmap, mvar = world
+    obs, nav = vehicle.obs, vehicle.obs.nav
+    upd = obs.ping_idx
+    inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    za = nmap.kernel_args()
+    rng = np.random.default_rng([KERNEL_SEED, 171])
+    m, row, yaw_off = 400, len(inc) // 2, 0.52
+    k = upd[row]
+    x0 = _tight_cloud(rng, nav, k, m, yaw_off)
+    x0[:, YAW] = nav.yaw[k] + yaw_off + rng.normal(0, 0.05, m)  # converged: within the series' range of the offset
+    noise = rng.standard_normal((m, 6))
+    want, want_dist = prop.propagate_tight_numpy(x0, inc[row], nav.yaw[k], noise, 0.07, 0.01, 3e-4,
+                                                 prop.DIST_NAVIGATION)
+    for off in (0.0, yaw_off):
+        x, dist = x0.copy(), np.empty((m, 2))
+        prop.propagate_tight(x, inc[row], nav.yaw[k], noise, 0.07, 0.01, 3e-4, prop.DIST_NAVIGATION, dist, off)
+        np.testing.assert_allclose(x, want, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(dist, want_dist, rtol=0, atol=1e-9)
+    u = np.array([1.2, 0.05, 0.01, -0.02])
+    want, _ = prop.propagate_tight_euler_numpy(x0, u, 1.0, inc[row], noise, 0.07, 0.01, 3e-4, prop.DIST_NONE)
+    for ref in ((0.0, 0.0, 0.0), (nav.pitch[k], nav.roll[k], nav.yaw[k] + yaw_off)):
+        x, dist = x0.copy(), np.empty((m, 2))
+        prop.propagate_tight_euler(x, u, 1.0, inc[row], noise, 0.07, 0.01, 3e-4, prop.DIST_NONE, dist, *ref)
+        np.testing.assert_allclose(x, want, rtol=0, atol=1e-9)
+    ranges = obs.dvl_ranges[row + 1]
+    dist = np.zeros((m, 2))
+    want_ll, want_best = lik.loglik_tight_numpy(x0, obs.dvl_beams, ranges, *za, 1.0, 5.0, dist, 0.1)
+    want_ma, want_ma_best = lik.loglik_tight_mapaware_numpy(x0, obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0,
+                                                            dist, 0.1, LIKELIHOOD["student-t"], 4.0)
+    for ref_yaw in (nav.yaw[k], nav.yaw[k] + yaw_off):
+        ll = np.empty(m)
+        best = lik.loglik_tight(x0, obs.dvl_beams, ranges, *za, 1.0, 5.0, dist, 0.1, nav.pitch[k], nav.roll[k],
+                                ref_yaw, ll)
+        np.testing.assert_allclose(ll, want_ll, rtol=1e-9, atol=1e-9)
+        assert best == pytest.approx(want_best, rel=1e-9)
+        best = lik.loglik_tight_mapaware(x0, obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0, dist, 0.1,
+                                         nav.pitch[k], nav.roll[k], ref_yaw, LIKELIHOOD["student-t"], 4.0, ll)
+        np.testing.assert_allclose(ll, want_ma, rtol=1e-9, atol=1e-9)
+        assert best == pytest.approx(want_ma_best, rel=1e-9)
 
 
 @pytest.mark.parametrize("likelihood", sorted(LIKELIHOODS))
