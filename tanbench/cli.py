@@ -8,6 +8,7 @@ error, 2 bad input, 130 interrupted.
 from __future__ import annotations
 
 import json
+import signal
 import sys
 from pathlib import Path
 from typing import Optional
@@ -41,6 +42,13 @@ def _main(
 
 def _default_out(sweep) -> Path:
     return Path("results") / sweep.name
+
+
+def _terminate_as_interrupt(signum, frame) -> None:
+    """SIGTERM (``kill PID``, a batch scheduler's stop) ends a sweep as Ctrl-C does: the finished
+    runs stay stored, the workers are stopped, and the resume hint is printed. Without this the
+    CLI would die at once and leave its worker processes running."""
+    raise KeyboardInterrupt
 
 
 def _count(tasks: int, n_methods: int) -> str:
@@ -77,12 +85,15 @@ def run(
         f" {flag} {value}" for flag, value in (("--workers", workers), ("--scheduler", scheduler), ("--runs", runs))
         if value is not None) + (f" --series {series}" if series != "summary" else "")
     n_m = len(sweep.spec.methods)
+    on_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
     try:
         report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force, add=add,
                            progress=not quiet, echo=typer.echo)
     except KeyboardInterrupt:  # before the tasks (validation) or after them (tables): nothing half-done
         typer.echo(f"interrupted; resume with: {again}", err=True)
         raise typer.Exit(130) from None
+    finally:
+        signal.signal(signal.SIGTERM, on_term)
     if report.interrupted:
         typer.echo(f"interrupted: {_count(report.finished, n_m)} finished in this session are stored in {out}; "
                    f"resume with: {again}", err=True)

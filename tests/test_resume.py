@@ -1,4 +1,4 @@
-"""Killing a sweep (SIGKILL or Ctrl-C) at any point and re-running the same command completes it exactly.
+"""Killing a sweep (SIGKILL, Ctrl-C or SIGTERM) at any point and re-running the same command completes it exactly.
 
 The CLI runs in its own process group (``start_new_session``) so the signal reaches it
 and its worker processes together, as a terminal's Ctrl-C or an OOM/cluster kill would.
@@ -109,20 +109,26 @@ def test_sigkill_then_resume_matches_uninterrupted(reference, tmp_path, after):
     assert_finished_like(out, ref_out)
 
 
-def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path):
-    """Ctrl-C (SIGINT to the group) stops the sweep within seconds with exit 130 and a resume hint."""
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm-to-the-cli"])
+def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path, how):
+    """Ctrl-C (SIGINT to the group), or SIGTERM to the CLI process alone (``kill PID``, a batch
+    scheduler's stop), stops the sweep within seconds with exit 130 and a resume hint, and takes
+    the worker processes with it."""
     sweep, ref_out = reference
     out = tmp_path / "out"
     args = ("run", sweep, "--out", out, "--workers", 2)
     proc = start_cli(*args)
     seen = wait_for_runs(proc, out, N_TASKS // 3)
-    kill_group(proc, signal.SIGINT)
+    if how == "ctrl-c":
+        kill_group(proc, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGTERM)
     try:
         stdout, stderr = proc.communicate(timeout=30)
     except subprocess.TimeoutExpired:
         kill_group(proc, signal.SIGKILL)
         proc.communicate()
-        pytest.fail("the sweep did not stop within 30 s of Ctrl-C")
+        pytest.fail(f"the sweep did not stop within 30 s of {how}")
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr
     hint = [line for line in stderr.splitlines() if line.startswith("interrupted:")]
