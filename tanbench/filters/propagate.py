@@ -40,6 +40,25 @@ DIST_NONE, DIST_PARTICLE, DIST_NAVIGATION = (DISTANCE_INNOVATION[k] for k in ("n
 
 
 @nb.njit(cache=True, inline="always")
+def _move_particle(x, j, inc, de, dn, dyaw, n_e, n_n, n_u, n_pitch, n_roll, n_yaw, sig_pos, sig_up, sig_att,
+                   dist_mode):
+    """Move particle ``j`` by the displacement (de, dn) and heading change ``dyaw`` of either reading
+    of Eq. 1, up, pitch and roll by the navigation's increments, each with its noise; returns the
+    distance innovations (east, north)."""
+    ee = sig_pos * n_e
+    en = sig_pos * n_n
+    x[j, E] += de + ee
+    x[j, N] += dn + en
+    x[j, U] += inc[DUP] + sig_up * n_u
+    x[j, PITCH] += inc[DPITCH] + sig_att * n_pitch
+    x[j, ROLL] += inc[DROLL] + sig_att * n_roll
+    x[j, YAW] += dyaw + sig_att * n_yaw
+    if dist_mode == DIST_NAVIGATION:
+        return inc[D0E] - (de + ee), inc[D0N] - (dn + en)
+    return 0.0, 0.0
+
+
+@nb.njit(cache=True, inline="always")
 def propagate_tight_particle(x, j, inc, yaw_nav0, yaw_off, s_off, c_off, n_e, n_n, n_u, n_pitch, n_roll, n_yaw,
                              sig_pos, sig_up, sig_att, dist_mode):
     """Move particle ``j`` of ``x`` as :func:`propagate_tight` does, with its six standard
@@ -61,17 +80,8 @@ def propagate_tight_particle(x, j, inc, yaw_nav0, yaw_off, s_off, c_off, n_e, n_
     un = inc[D0N] + bx * inc[JAXN] - bz * inc[JAZN]
     de = c * ue - s * un
     dn = s * ue + c * un
-    ee = sig_pos * n_e
-    en = sig_pos * n_n
-    x[j, E] += de + ee
-    x[j, N] += dn + en
-    x[j, U] += inc[DUP] + sig_up * n_u
-    x[j, PITCH] += inc[DPITCH] + sig_att * n_pitch
-    x[j, ROLL] += inc[DROLL] + sig_att * n_roll
-    x[j, YAW] += inc[DYAW] + bx * inc[SX] - bz * inc[SZ] + sig_att * n_yaw
-    if dist_mode == DIST_NAVIGATION:
-        return inc[D0E] - (de + ee), inc[D0N] - (dn + en)
-    return 0.0, 0.0
+    return _move_particle(x, j, inc, de, dn, inc[DYAW] + bx * inc[SX] - bz * inc[SZ], n_e, n_n, n_u, n_pitch,
+                          n_roll, n_yaw, sig_pos, sig_up, sig_att, dist_mode)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
@@ -129,17 +139,8 @@ def propagate_tight_euler_particle(x, j, u, dt, inc, att0, n_e, n_n, n_u, n_pitc
     de = ((cg * cp - st * sg * sp) * vx - ct * sp * vy) * dt
     dn = ((cg * sp + st * sg * cp) * vx + ct * cp * vy) * dt
     yaw_rate = (-sg * (wx - x[j, BX]) + cg * (wz - x[j, BZ])) / ct
-    ee = sig_pos * n_e
-    en = sig_pos * n_n
-    x[j, E] += de + ee
-    x[j, N] += dn + en
-    x[j, U] += inc[DUP] + sig_up * n_u
-    x[j, PITCH] += inc[DPITCH] + sig_att * n_pitch
-    x[j, ROLL] += inc[DROLL] + sig_att * n_roll
-    x[j, YAW] += yaw_rate * dt + sig_att * n_yaw
-    if dist_mode == DIST_NAVIGATION:
-        return inc[D0E] - (de + ee), inc[D0N] - (dn + en)
-    return 0.0, 0.0
+    return _move_particle(x, j, inc, de, dn, yaw_rate * dt, n_e, n_n, n_u, n_pitch, n_roll, n_yaw, sig_pos, sig_up,
+                          sig_att, dist_mode)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)
