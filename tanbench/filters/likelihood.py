@@ -51,6 +51,19 @@ def _particle_dcm(x, j, att):
             -ct * sg, st, ct * cg)
 
 
+@nb.njit(cache=True, inline="always")
+def _footprint(x, j, dcm, vec, i):
+    """(east, north, up) of beam ``i``'s footprint (``vec`` from :func:`beam_vectors`) seen from
+    particle ``j`` with its attitude matrix ``dcm`` (:func:`_particle_dcm`)."""
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = dcm
+    a0 = vec[i, 0]
+    a1 = vec[i, 1]
+    a2 = vec[i, 2]
+    return (x[j, E] + c00 * a0 + c01 * a1 + c02 * a2,
+            x[j, N] + c10 * a0 + c11 * a1 + c12 * a2,
+            x[j, U] + c20 * a0 + c21 * a1 + c22 * a2)
+
+
 @nb.njit(cache=True)
 def beam_vectors(beams, ranges):
     """(n, 3) beam vectors times ranges, body frame, of the n beams with a range (not NaN), in
@@ -77,15 +90,10 @@ def loglik_tight_particle(x, j, vec, z, e0, n0, inv_re, inv_rn, inv_u2, outside_
     """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_tight` (and the fused filter
     loop): ``vec`` from :func:`beam_vectors`, ``att`` from :func:`attitude_reference`, ``dist_*``
     its distance innovations."""
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _particle_dcm(x, j, att)
+    dcm = _particle_dcm(x, j, att)
     sq = 0.0
     for i in range(vec.shape[0]):
-        a0 = vec[i, 0]
-        a1 = vec[i, 1]
-        a2 = vec[i, 2]
-        pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
-        pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
-        pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
+        pe, pn, pu = _footprint(x, j, dcm, vec, i)
         h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
         if h == h:
             sq += (pu - h) * (pu - h)
@@ -262,16 +270,11 @@ def loglik_tight_mapaware_particle(x, j, vec, zv, e0, n0, inv_re, inv_rn, su2, i
                                    kind, nu, dist_e, dist_n, inv_d2):
     """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_tight_mapaware`;
     ``zv``: the map and its variance grid interleaved (``grid.stack_grids``)."""
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _particle_dcm(x, j, att)
+    dcm = _particle_dcm(x, j, att)
     acc = (0.0, 1.0, 1.0, 0.0)
     chi = 0.0
     for i in range(vec.shape[0]):
-        a0 = vec[i, 0]
-        a1 = vec[i, 1]
-        a2 = vec[i, 2]
-        pe = x[j, E] + c00 * a0 + c01 * a1 + c02 * a2
-        pn = x[j, N] + c10 * a0 + c11 * a1 + c12 * a2
-        pu = x[j, U] + c20 * a0 + c21 * a1 + c22 * a2
+        pe, pn, pu = _footprint(x, j, dcm, vec, i)
         h, mv = bilinear_pair(zv, e0, n0, inv_re, inv_rn, pe, pn)
         if h == h and mv == mv:
             v = su2 + mv

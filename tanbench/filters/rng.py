@@ -329,6 +329,20 @@ def pcg64_double(w):
     return np.float64(_pcg64_next(w) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
+@nb.njit(cache=True, inline="always")
+def _pcg64_ziggurat_draw(w):
+    """One word of numpy's ziggurat: (layer ``idx``, the 52-bit magnitude ``rabs``, the signed
+    candidate ``x``); ``x`` is the normal if ``rabs < ki_double[idx]``."""
+    r = _pcg64_next(w)
+    idx = np.intp(r & np.uint64(0xFF))
+    r >>= np.uint64(8)
+    rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
+    x = np.float64(rabs) * wi_double[idx]
+    if r & np.uint64(1):
+        x = -x
+    return idx, rabs, x
+
+
 @nb.njit(cache=True)
 def _pcg64_normal_slow(w, idx, rabs, x):
     """numpy's ziggurat beyond the rectangle test: the tail (layer 0) or the wedge, then new words."""
@@ -341,13 +355,7 @@ def _pcg64_normal_slow(w, idx, rabs, x):
                     return -(ziggurat_nor_r + xx) if (rabs >> np.uint64(8)) & np.uint64(1) else ziggurat_nor_r + xx
         elif (fi_double[idx - 1] - fi_double[idx]) * pcg64_double(w) + fi_double[idx] < np.exp(-0.5 * x * x):
             return x
-        r = _pcg64_next(w)
-        idx = np.intp(r & np.uint64(0xFF))
-        r >>= np.uint64(8)
-        rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
-        x = np.float64(rabs) * wi_double[idx]
-        if r & np.uint64(1):
-            x = -x
+        idx, rabs, x = _pcg64_ziggurat_draw(w)
         if rabs < ki_double[idx]:
             return x
 
@@ -356,13 +364,7 @@ def _pcg64_normal_slow(w, idx, rabs, x):
 def pcg64_standard_normal(w):
     """numpy's standard normal (random_standard_normal) on the PCG64 words ``w``; the fast
     path (one word, one table compare) inline."""
-    r = _pcg64_next(w)
-    idx = np.intp(r & np.uint64(0xFF))
-    r >>= np.uint64(8)
-    rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
-    x = np.float64(rabs) * wi_double[idx]
-    if r & np.uint64(1):
-        x = -x
+    idx, rabs, x = _pcg64_ziggurat_draw(w)
     if rabs < ki_double[idx]:
         return x
     return _pcg64_normal_slow(w, idx, rabs, x)

@@ -126,18 +126,12 @@ def _bilinear_weights(z00, z01, z10, z11, tx, ty):
 
 
 @nb.njit(cache=True, inline="always")
-def bilinear_in_cell(z, i, j, tx, ty):
-    """Bilinear value of grid ``z`` at position (tx, ty) in cell (i, j) (from :func:`bilinear_cell`)."""
-    return _bilinear_weights(z[i, j], z[i, j + 1], z[i + 1, j], z[i + 1, j + 1], tx, ty)
-
-
-@nb.njit(cache=True, inline="always")
 def bilinear(z, e0, n0, inv_re, inv_rn, e, n):
     """Bilinear interpolation of grid ``z`` at (e, n); NaN outside the node extent."""
     i, j, tx, ty = bilinear_cell(z.shape[0], z.shape[1], e0, n0, inv_re, inv_rn, e, n)
     if i < 0:
         return np.nan
-    return bilinear_in_cell(z, i, j, tx, ty)
+    return _bilinear_weights(z[i, j], z[i, j + 1], z[i + 1, j], z[i + 1, j + 1], tx, ty)
 
 
 @nb.njit(cache=True)
