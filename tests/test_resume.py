@@ -144,3 +144,39 @@ def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path, how):
     assert f"{counted(N_TASKS - stored)} run, {counted(stored)} already done" in again.stdout
     assert_clean_and_readable(out)
     assert_finished_like(out, ref_out)
+
+
+STOP_WITH_HALF_A_RESULT = """
+import sys, time
+from pathlib import Path
+sys.path.insert(0, {tests!r})
+from half_message import send_half_a_result
+from tanbench.runner.executors import open_executor
+
+with open_executor(1, None) as handle:
+    handle.executor.submit(send_half_a_result, {sent!r})
+    while not Path({sent!r}).exists():
+        time.sleep(0.05)
+    time.sleep(1)  # the pool's manager thread reads the header and waits for the rest
+    handle.stop_now()
+print("stopped", flush=True)
+"""
+
+
+def test_stop_now_with_half_a_result_in_the_pipe_exits(tmp_path):
+    """A worker stopped while it sends its result leaves half a message in the result pipe;
+    stopping the pool must not leave its manager thread waiting for the rest (the CLI hung
+    at exit, after its resume hint, when SIGTERM caught a worker mid-send)."""
+    from sweep_support import ROOT, cli_env
+
+    script = STOP_WITH_HALF_A_RESULT.format(tests=str(ROOT / "tests"), sent=str(tmp_path / "sent"))
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=cli_env(), start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail("the process did not exit after stop_now()")
+    assert proc.returncode == 0, stderr
+    assert "stopped" in stdout

@@ -29,6 +29,7 @@ from tanbench.errors import TanbenchError
 
 THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 CONNECT_TIMEOUT_S = 10
+STOP_JOIN_S = 10  # how long a stopped worker process is given to exit
 
 
 SINGLE_THREAD_ENV = {var: "1" for var in THREAD_VARS}
@@ -124,9 +125,20 @@ def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None =
                                    initargs=(maps_pickle, worlds_pickle, scenario_json))
 
         def stop_now():
-            for proc in list(getattr(pool, "_processes", {}).values()):
+            processes = list((getattr(pool, "_processes", None) or {}).values())
+            for proc in processes:
                 proc.terminate()
-            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in processes:
+                proc.join(STOP_JOIN_S)
+            # A worker stopped while sending its result leaves half a message in the result
+            # pipe; the pool's manager thread then waits in recv() for the rest, and since this
+            # process holds the pipe's write end too, it would wait forever (and the
+            # interpreter's exit joins that thread: the CLI would hang after its resume hint).
+            # With every writer closed, the read ends (EOF) and the pool shuts down as broken.
+            result_queue = getattr(pool, "_result_queue", None)
+            if result_queue is not None:
+                result_queue._writer.close()
+            pool.shutdown(wait=True, cancel_futures=True)
 
         try:
             yield ExecutorHandle(pool, f"{workers} local worker process{'es' if workers > 1 else ''}", stop_now)
