@@ -1,14 +1,18 @@
-"""Speed of the methods: whole runs, their random-number variants, kernels against numpy references.
+"""Speed of the methods: whole runs, the two random-number streams, kernels against numpy references.
 
 The bench scenario is the paper's: area A, the 10 m map, 4 DVL beams, 3000 particles,
 a whole 1190 s run (1191 updates). For every registered method it reports
 
 * ns per cost unit (particle-step for the particle filters: a run's filter time divided
-  by updates x particles), by thread CPU time (what the method costs one core, robust
-  on a loaded machine) and by wall time, and the whole run's wall time;
-* for the built-in filters, the same with ``filter.random_numbers: fast``;
-* the ratio of one update step in plain numpy (the kernels' references) to the jitted
-  step, and a per-kernel breakdown (ns per particle) on a mid-run cloud.
+  by updates x particles; grid cell, profile match or update for the others), by
+  thread CPU time (what the method costs one core, robust on a loaded machine) and by
+  wall time, and the whole run's wall time;
+* for the built-in particle filters, the same with the other stream of
+  ``filter.random_numbers`` (``numpy``);
+* for every built-in method, one update step of its kernels against the same step of
+  their plain-numpy references (the ratio numpy / jitted);
+* a per-kernel breakdown (ns per particle) of a tight-dvl and a loose-dvl update on a
+  mid-run cloud.
 
 Figures depend on the machine and its load; nothing here is asserted by the tests.
 ``calibrated_cost_ns`` gives what ``MethodRecord.cost_ns`` (``tanbench plan``'s estimate)
@@ -23,6 +27,7 @@ import time
 import numpy as np
 
 BENCH_SEED = 2017
+PARTICLE_FILTERS = ("tight-dvl", "tight-sbe", "loose-dvl")  # the ones that take filter.random_numbers
 
 
 def _best(fn, n):
@@ -37,13 +42,13 @@ def _best(fn, n):
     return min(cpu), min(wall)
 
 
-def bench_scenario(particles: int, random_numbers: str = "numpy"):
+def bench_scenario(particles: int, random_numbers: str | None = None):
     from tanbench.config import Scenario
 
-    return Scenario(particles=particles, filter={"random_numbers": random_numbers})
+    return Scenario(particles=particles, filter={} if random_numbers is None else {"random_numbers": random_numbers})
 
 
-def run_figures(method: str, particles: int, repeats: int, random_numbers: str = "numpy") -> dict:
+def run_figures(method: str, particles: int, repeats: int, random_numbers: str | None = None) -> dict:
     """Whole-run figures of ``method``: ns per cost unit (CPU and wall), run wall, calibrated cost."""
     from tanbench.methods import get, run_method
     from tanbench.simulation import simulate_vehicle
@@ -62,7 +67,8 @@ def run_figures(method: str, particles: int, repeats: int, random_numbers: str =
         if ess is None and "ess" in result.series:
             ess = np.asarray(result.series["ess"], dtype=float)
     return {
-        "method": method, "random_numbers": random_numbers, "cost_units": units,
+        "method": method, "random_numbers": scenario.filter.random_numbers, "stream": method in PARTICLE_FILTERS,
+        "cost_units": units,
         "ns_per_unit_cpu": round(min(cpu) / units * 1e9, 1),
         "ns_per_unit_wall": round(min(filt) / units * 1e9, 1),
         "run_wall_s": round(min(wall), 3),
@@ -70,11 +76,16 @@ def run_figures(method: str, particles: int, repeats: int, random_numbers: str =
     }
 
 
-def _mid_run_state(particles: int):
-    """A mid-run tight cloud and the inputs of one update of the bench run."""
+def bench_state(particles: int) -> dict:
+    """The bench run half-way and a converged-looking tight cloud (8, M) about the truth there:
+    what the kernel breakdown and the reference steps work on."""
+    from tanbench.filters.likelihood import beam_vectors
+    from tanbench.filters.trig import attitude_reference
     from tanbench.methods import method_context
+    from tanbench.methods.tight import likelihood_bundle, likelihood_grid
     from tanbench.navigation.increments import compute_increments
     from tanbench.simulation import simulate_vehicle
+    from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
     scenario = bench_scenario(particles)
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(BENCH_SEED))
@@ -82,171 +93,280 @@ def _mid_run_state(particles: int):
     obs, nav, upd = vehicle.obs, vehicle.obs.nav, ctx.updates.imu
     rng = np.random.default_rng(5)
     k = len(upd) // 2
-    x0 = np.empty((particles, 8))
-    x0[:, 0] = vehicle.truth.pos[upd[k], 0] + rng.uniform(-20, 20, particles)
-    x0[:, 1] = vehicle.truth.pos[upd[k], 1] + rng.uniform(-20, 20, particles)
-    x0[:, 2] = nav.pos[upd[k], 2]
-    x0[:, 3] = nav.pitch[upd[k]]
-    x0[:, 4] = nav.roll[upd[k]]
+    x0 = np.empty((8, particles))
+    x0[0] = vehicle.truth.pos[upd[k], 0] + rng.uniform(-20, 20, particles)
+    x0[1] = vehicle.truth.pos[upd[k], 1] + rng.uniform(-20, 20, particles)
+    x0[2] = nav.pos[upd[k], 2]
+    x0[3] = nav.pitch[upd[k]]
+    x0[4] = nav.roll[upd[k]]
     # headings about the true one, as a converged cloud's: ~30 degrees off the navigation's
-    x0[:, 5] = vehicle.truth.yaw[upd[k]] + rng.normal(0, 0.02, particles)
-    x0[:, 6:] = rng.normal(0, 1e-4, (particles, 2))
+    x0[5] = vehicle.truth.yaw[upd[k]] + rng.normal(0, 0.02, particles)
+    x0[6:] = rng.normal(0, 1e-4, (2, particles))
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
-    from tanbench.methods.tight import likelihood_bundle
+    yaw_off = float(np.mean(x0[5]) - nav.yaw[upd[k]])  # the cloud's heading offset, as the loop keeps it
+    ranges = np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows[k + 1]])
+    c = dcm_body_to_nav_numpy(np.array([nav.pitch[upd[k + 1]]]), np.array([nav.roll[upd[k + 1]]]),
+                              np.array([nav.yaw[upd[k + 1]]]))[0]
+    return dict(
+        scenario=scenario, vehicle=vehicle, ctx=ctx, k=k, x0=x0, inc=inc[k], nav=nav, upd=upd, yaw_off=yaw_off,
+        yaw0=float(nav.yaw[upd[k]]), lik=likelihood_bundle(scenario.filter), grid=likelihood_grid(scenario.filter, ctx.nmap),
+        ranges=ranges, beams=np.ascontiguousarray(obs.dvl_beams), vec=beam_vectors(np.ascontiguousarray(obs.dvl_beams), ranges),
+        att=attitude_reference(nav.pitch[upd[k + 1]], nav.roll[upd[k + 1]], nav.yaw[upd[k + 1]] + yaw_off),
+        offsets=np.ascontiguousarray((obs.dvl_beams @ c.T) * ranges[:, None]), up=float(nav.pos[upd[k + 1], 2]),
+        uni=rng.random(particles))
 
-    return dict(k=k, x0=x0, inc=inc, nav=nav, upd=upd, zargs=ctx.nmap.kernel_args(),
-                lik=likelihood_bundle(scenario.filter, ctx.nmap),
-                ranges=np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows[k + 1]]),
-                beams=np.ascontiguousarray(obs.dvl_beams), noise=rng.standard_normal((particles, 6)),
-                uni=rng.random(particles))
+
+# the tight filter's bench settings: Table 2's noise per 1 s update (position with the DVL distance
+# folded in, up, attitude) and the measurement model
+SIGMAS = (0.0707, 0.01, math.radians(2.0 / 60.0))
+SIG_U, OUTSIDE, SIG_D = 1.0, 5.0, 0.1
 
 
 def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
-    """ns per particle (thread CPU) of each kernel of one tight-dvl and loose-dvl update,
-    the jitted step against its numpy reference step, and the random numbers' cost."""
-    import numba as nb
+    """ns per particle (thread CPU) of each pass of one tight-dvl and one loose-dvl update on a
+    mid-run cloud (the loops run these passes over blocks of the cloud; here each runs on the
+    whole cloud, so the figures leave out the blocks' cache benefit)."""
+    from tanbench.filters import likelihood as L
+    from tanbench.filters.estimate import weighted_estimate
+    from tanbench.filters.propagate import DIST_PARTICLE, propagate_loose, propagate_tight
+    from tanbench.filters.resample import (REG_LIU_WEST, SYSTEMATIC, add_log_weights, apply_resample,
+                                           normalise_with_ess, regularise, resample_indices)
+    from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals
+    from tanbench.terrain.grid import gather_cells
 
-    from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
-    from tanbench.filters.likelihood import (loglik_loose, loglik_loose_numpy, loglik_tight, loglik_tight_mapaware_stacked,
-                                            loglik_tight_numpy)
-    from tanbench.filters.params import Readings, TightModel
-    from tanbench.filters.rng import loop_rng
-    from tanbench.filters.tight import propagate_and_weigh
-    from tanbench.filters.propagate import (propagate_loose, propagate_loose_numpy, propagate_tight,
-                                            propagate_tight_numpy)
-    from tanbench.filters.resample import (REG_LIU_WEST, SYSTEMATIC, apply_resample, effective_sample_size,
-                                           normalize_log_weights, normalize_log_weights_numpy, regularise,
-                                           resample_indices, resample_indices_numpy, shrink_jitter_numpy)
-    from tanbench.filters.rng import FastRng
-    from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
-
-    s = _mid_run_state(particles)
-    m, k, x0, nav, upd, z = particles, s["k"], s["x0"], s["nav"], s["upd"], s["zargs"]
-    sig = (0.07, 0.01, math.radians(2 / 60))
-    yaw_off = float(np.mean(x0[:, 5]) - nav.yaw[upd[k]])  # the cloud's heading offset, as the loop keeps it
-    ref = (nav.pitch[upd[k + 1]], nav.roll[upd[k + 1]], nav.yaw[upd[k + 1]] + yaw_off)
-    x, dist, ll, w = x0.copy(), np.zeros((m, 2)), np.empty(m), np.empty(m)
+    s = bench_state(particles)
+    m, x0, grid, lik, vec = particles, s["x0"], s["grid"], s["lik"], s["vec"]
+    x, ll, w, logw = x0.copy(), np.empty(m), np.empty(m), np.zeros(m)
     idx, scratch, mean, v, cov = np.empty(m, dtype=np.int64), np.empty_like(x0), np.empty(8), np.empty(8), \
         np.empty((2, 2))
-    cols = np.array([0, 1, 5, 6, 7], dtype=np.int64)
-    noise = np.empty((m, 6))
-    xl = np.ascontiguousarray(x0[:, :2])
-    c = dcm_body_to_nav_numpy(np.array([ref[0]]), np.array([ref[1]]), np.array([nav.yaw[upd[k + 1]]]))[0]
-    offsets = np.ascontiguousarray((s["beams"] @ c.T) * s["ranges"][:, None])
-    d0 = s["inc"][k][:2]
+    noise, dist = np.empty((6, m)), np.zeros((2, m))
+    work = L.work_block(L.new_likelihood_work(m, 4 * grid.grids), m)
+    su2, inv_d2, out2 = L.beam_constants(SIG_U, SIG_D, OUTSIDE)
+    inv_nu, half_nu1, student = L._density_constants(lik)
+    rows = np.array([0, 1, 5, 6, 7], dtype=np.int64)
+    fast = FastRng.from_seed(np.random.SeedSequence(7)).state
+    numpy_stream = Pcg64Stream(np.random.default_rng(7))
 
     def per(fn):
         return round(_best(fn, reps)[0] / m * 1e9, 1)
 
-    out = {"tight-dvl": {}, "loose-dvl": {}}
-    from tanbench.filters.rng import Pcg64Stream
+    t = {}
+    t["random normals x6 (fast: xoshiro256++ lanes)"] = per(lambda: fill_normals(fast, noise))
+    t["random normals x6 (numpy: PCG64 inline)"] = per(lambda: fill_normals(numpy_stream, noise))
+    t["propagate (exact increments)"] = per(lambda: propagate_tight(x, s["inc"], s["yaw0"], noise, *SIGMAS,
+                                                                    DIST_PARTICLE, dist, s["yaw_off"]))
+    x[:] = x0
+    t["attitude matrices (3 sin/cos)"] = per(lambda: L.attitude_matrices(x, 0, s["att"], work.dcm))
+    beams = vec.shape[0]
+    t[f"footprints and cells (x{beams} beams)"] = beams * per(
+        lambda: L.tight_footprints(x, 0, work.dcm, *vec[0], grid, work.cell, work.tx, work.ty, work.pu))
+    t[f"cell corners copied (x{beams} beams, scalar)"] = beams * per(
+        lambda: gather_cells(work.cell, grid.nodes, grid.grids, grid.nx, work.stage))
+    t[f"beam terms (x{beams} beams)"] = beams * per(
+        lambda: L.add_beam_terms(work.stage, grid.grids, work.cell, work.tx, work.ty, work.pu, su2, out2,
+                                 lik.mapaware, inv_nu, work))
+    t["log-likelihoods (2 logs)"] = per(lambda: L.finish_loglik(work, lik.mapaware, student, half_nu1, dist, False,
+                                                                inv_d2, ll))
+    t[f"whole likelihood pass ({beams} beams, map-aware Student-t)"] = per(
+        lambda: L.loglik_tight_pass(x, 0, vec, grid, lik, su2, out2, s["att"], dist, False, inv_d2, work, ll))
+    t["weights: log-weights, normalisation, ESS"] = per(lambda: normalise_with_ess(logw, add_log_weights(logw, ll), w))
+    logw[:] = 0.0
+    normalise_with_ess(logw, add_log_weights(logw, ll), w)
+    t["estimate (8 states)"] = per(lambda: weighted_estimate(x, w, 5, s["yaw0"], mean, v, cov))
+    t["resampling: indices (resampled updates only)"] = per(lambda: resample_indices(SYSTEMATIC, w, s["uni"], idx))
+    t["resampling: copy (resampled updates only)"] = per(lambda: apply_resample(x, idx, scratch))
+    x[:] = x0
+    t["regularisation, 5 states (resampled updates only)"] = per(lambda: regularise(x, fast, REG_LIU_WEST, rows,
+                                                                                     0.1, 8))
+    x[:] = x0
+    xl, lo = np.ascontiguousarray(x0[:2]), {}
+    rows_l = L.used_offsets(s["offsets"])
+    lo["random normals x3 (fast)"] = per(lambda: fill_normals(fast, noise[:3]))
+    lo["propagate"] = per(lambda: propagate_loose(xl, 1.0, 0.5, noise[:3], 0.1, 0.5))
+    xl[:] = x0[:2]
+    lo[f"whole likelihood pass ({rows_l.shape[0]} beams, map-aware Student-t)"] = per(
+        lambda: L.loglik_loose_pass(xl, 0, rows_l, s["up"], grid, lik, su2, out2, work, ll))
+    lo["estimate (2 states)"] = per(lambda: weighted_estimate(xl, w, -1, 0.0, mean[:2], v[:2], cov))
+    return {"tight-dvl": t, "loose-dvl": lo}
 
-    for name, gen in (("numpy Generator", np.random.default_rng(7)),
-                      ("numpy, inline PCG64 as the loops draw", Pcg64Stream(np.random.default_rng(7))),
-                      ("fast", FastRng.from_seed(np.random.SeedSequence(7)))):
-        out["tight-dvl"][f"random normals x6 ({name})"] = per(lambda: _draw_normals(gen, noise))
-        out["tight-dvl"][f"random uniform x1 ({name})"] = per(lambda: _draw_uniforms(gen, s["uni"].copy()))
-    t = out["tight-dvl"]
-    t["propagate"] = per(lambda: propagate_tight(x, s["inc"][k], nav.yaw[upd[k]], s["noise"], *sig, 1, dist,
-                                                 yaw_off))
-    x[:] = x0
-    t["likelihood (4 beams)"] = per(lambda: loglik_tight(x, s["beams"], s["ranges"], *z, 1.0, 5.0, dist, 0.1,
-                                                         *ref, ll))
-    zz = s["lik"].grids
-    t["likelihood map-aware Student-t (4 beams)"] = per(lambda: loglik_tight_mapaware_stacked(
-        x, s["beams"], s["ranges"], zz, *z[1:], 1.0, 5.0, dist, 0.1, *ref, s["lik"].kind, s["lik"].nu, ll))
-    model = TightModel(sig[0], sig[1], sig[2], 1, 0.1, 1.0, 5.0)
-    readings = Readings(0, 1.0, 0.0, True, 0.0)
-    stream = loop_rng(np.random.default_rng(9), "numpy")
 
-    def fused():
-        x[:] = x0
-        propagate_and_weigh(x, stream, True, s["inc"][k], nav.yaw[upd[k]], yaw_off, nav.pitch[upd[k]],
-                            nav.roll[upd[k]], np.zeros(4), readings, model, s["beams"], s["ranges"], z, s["lik"],
-                            *ref, ll)
+def _pf_step(s, sensor: str, loose: bool):
+    """One update of a particle filter's kernels, jitted and by their numpy references: (jit, numpy) callables."""
+    from tanbench.filters import likelihood as L
+    from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
+    from tanbench.filters.propagate import (DIST_PARTICLE, propagate_loose, propagate_loose_numpy, propagate_tight,
+                                            propagate_tight_numpy)
+    from tanbench.filters.resample import (SYSTEMATIC, apply_resample, normalize_log_weights,
+                                           normalize_log_weights_numpy, resample_indices, resample_indices_numpy,
+                                           shrink_jitter, shrink_jitter_numpy)
+    from tanbench.filters.rng import FastRng, fill_normals
+    from tanbench.terrain.representation import map_variance_grid
 
-    t["fused pass: 6 normals + propagate + map-aware likelihood (incl. copy)"] = per(fused)
-    x[:] = x0
-    t["normalise"] = per(lambda: normalize_log_weights(ll, w))
-    t["estimate"] = per(lambda: weighted_estimate(x, w, 5, 0.0, mean, v, cov))
-    t["ess"] = per(lambda: effective_sample_size(w))
-    t["resample (indices + copy)"] = per(lambda: (resample_indices(SYSTEMATIC, w, s["uni"], idx),
-                                                  apply_resample(x, idx, scratch)))
-    x[:] = x0
-    gen = np.random.default_rng(8)
-    t["regularise (5 states, numpy draws)"] = per(lambda: regularise(x, gen, REG_LIU_WEST, cols, 0.1, 8))
-    x[:] = x0
-    fast = FastRng.from_seed(np.random.SeedSequence(8))
-    t["regularise (5 states, fast draws)"] = per(lambda: regularise(x, fast, REG_LIU_WEST, cols, 0.1, 8))
-    x[:] = x0
+    m, lik, grid = s["x0"].shape[1], s["lik"], s["grid"]
+    obs, nmap, f = s["vehicle"].obs, s["ctx"].nmap, s["scenario"].filter
+    mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    za = nmap.kernel_args()
+    beams = np.ascontiguousarray(obs.dvl_beams if sensor == "dvl" else obs.sbe_beams)
+    ranges = s["ranges"] if sensor == "dvl" else np.ascontiguousarray(obs.sbe_ranges[s["ctx"].updates.rows[s["k"] + 1]])
+    x0 = np.ascontiguousarray(s["x0"][:2]) if loose else s["x0"]
+    rows = np.array([0, 1], dtype=np.int64) if loose else np.array([0, 1, 5, 6, 7], dtype=np.int64)
+    nnoise = 3 if loose else 6
+    fast = FastRng.from_seed(np.random.SeedSequence(9)).state
+    gen = np.random.default_rng(9)
+    buf = dict(noise=np.empty((nnoise, m)), jitter=np.empty((rows.size, m)), dist=np.zeros((2, m)), ll=np.empty(m),
+               w=np.empty(m), idx=np.empty(m, dtype=np.int64), scratch=np.empty_like(x0), mean=np.empty(x0.shape[0]),
+               var=np.empty(x0.shape[0]), cov=np.empty((2, 2)))
 
-    def tight_jit():
-        xx = x0.copy()
-        propagate_tight(xx, s["inc"][k], nav.yaw[upd[k]], s["noise"], *sig, 1, dist, yaw_off)
-        loglik_tight(xx, s["beams"], s["ranges"], *z, 1.0, 5.0, dist, 0.1, *ref, ll)
+    def jit():
+        b = buf
+        x = x0.copy()
+        fill_normals(fast, b["noise"])
+        if loose:
+            propagate_loose(x, 1.0, 0.5, b["noise"], 0.1, 0.5)
+            L.loglik_loose(x, s["offsets"], s["up"], grid, lik, SIG_U, OUTSIDE, b["ll"])
+        else:
+            propagate_tight(x, s["inc"], s["yaw0"], b["noise"], *SIGMAS, DIST_PARTICLE, b["dist"], s["yaw_off"])
+            L.loglik_tight(x, beams, ranges, grid, lik, SIG_U, OUTSIDE, b["dist"], SIG_D, False, *s["att"][::3], b["ll"])
+        normalize_log_weights(b["ll"], b["w"])
+        weighted_estimate(x, b["w"], -1 if loose else 5, s["yaw0"], b["mean"], b["var"], b["cov"])
+        resample_indices(SYSTEMATIC, b["w"], s["uni"], b["idx"])
+        apply_resample(x, b["idx"], b["scratch"])
+        fill_normals(fast, b["jitter"])
+        shrink_jitter(x, rows, 0.1, b["jitter"])
+
+    def numpy():
+        noise = gen.standard_normal((nnoise, m))
+        if loose:
+            x = propagate_loose_numpy(x0, 1.0, 0.5, noise, 0.1, 0.5)
+            ll, _ = L.loglik_loose_numpy(x, s["offsets"], s["up"], za[0], mvar, *za[1:], SIG_U, OUTSIDE, lik.mapaware,
+                                         lik.kind, lik.nu)
+        else:
+            x, _ = propagate_tight_numpy(x0, s["inc"], s["yaw0"], noise, *SIGMAS, DIST_PARTICLE)
+            ll, _ = L.loglik_tight_numpy(x, beams, ranges, za[0], mvar, *za[1:], SIG_U, OUTSIDE, None, SIG_D,
+                                         lik.mapaware, lik.kind, lik.nu)
+        w, _ = normalize_log_weights_numpy(ll)
+        weighted_estimate_numpy(x, w, -1 if loose else 5, s["yaw0"])
+        x = x[:, resample_indices_numpy(SYSTEMATIC, w, s["uni"])]
+        shrink_jitter_numpy(x, rows, 0.1, gen.standard_normal((rows.size, m)))
+
+    return jit, numpy
+
+
+def _mpf_step(s):
+    from tanbench.filters import mpf
+    from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
+    from tanbench.filters.resample import normalize_log_weights, normalize_log_weights_numpy
+
+    m = s["x0"].shape[1]
+    za = s["ctx"].nmap.kernel_args()
+    x0 = np.empty((mpf.N_MPF, m))
+    x0[mpf.E], x0[mpf.N], x0[mpf.PSI] = s["x0"][0], s["x0"][1], s["x0"][5]
+    x0[mpf.B], x0[mpf.PB], x0[mpf.EPS], x0[mpf.PEPS] = 0.0, 1.0, 0.0, 1e-10
+    noise = np.random.default_rng(3).standard_normal((3, m))
+    ll, w, mean, var, cov = np.empty(m), np.empty(m), np.empty(mpf.N_MPF), np.empty(mpf.N_MPF), np.empty((2, 2))
+    args = (s["offsets"], s["up"], s["yaw0"], *za, SIG_U, OUTSIDE)
+
+    def jit():
+        x = x0.copy()
+        mpf.mpf_propagate(x, s["inc"], s["yaw0"], noise, 0.07, 1e-7, 1e-12, 1e-6)
+        mpf.mpf_loglik_update(x, *args, ll)
         normalize_log_weights(ll, w)
-        weighted_estimate(xx, w, 5, 0.0, mean, v, cov)
-        resample_indices(SYSTEMATIC, w, s["uni"], idx)
-        apply_resample(xx, idx, scratch)
+        weighted_estimate(x, w, mpf.PSI, s["yaw0"], mean, var, cov)
 
-    def tight_numpy():
-        xx, dd = propagate_tight_numpy(x0, s["inc"][k], nav.yaw[upd[k]], s["noise"], *sig, 1)
-        lq, _ = loglik_tight_numpy(xx, s["beams"], s["ranges"], *z, 1.0, 5.0, dd, 0.1)
-        ww, _ = normalize_log_weights_numpy(lq)
-        weighted_estimate_numpy(xx, ww, 5, 0.0)
-        xx = xx[resample_indices_numpy(SYSTEMATIC, ww, s["uni"])]
-        shrink_jitter_numpy(xx, cols, 0.1, s["noise"][:, :5])
+    def numpy():
+        x = mpf.mpf_propagate_numpy(x0, s["inc"], s["yaw0"], noise, 0.07, 1e-7, 1e-12, 1e-6)
+        lq, _, x = mpf.mpf_loglik_update_numpy(x, *args)
+        wq, _ = normalize_log_weights_numpy(lq)
+        weighted_estimate_numpy(x, wq, mpf.PSI, s["yaw0"])
 
-    lw = np.empty(m)
-    lo = out["loose-dvl"]
-    lo["propagate"] = per(lambda: propagate_loose(xl, d0[0], d0[1], s["noise"][:, :3], 0.1, 0.5))
-    xl[:] = x0[:, :2]
-    lo["likelihood (4 beams)"] = per(lambda: loglik_loose(xl, offsets, nav.pos[upd[k + 1], 2], *z, 1.0, 5.0, lw))
-    lo["estimate"] = per(lambda: weighted_estimate(xl, w, -1, 0.0, mean[:2], v[:2], cov))
-
-    def loose_jit():
-        xx = xl.copy()
-        propagate_loose(xx, d0[0], d0[1], s["noise"][:, :3], 0.1, 0.5)
-        loglik_loose(xx, offsets, nav.pos[upd[k + 1], 2], *z, 1.0, 5.0, lw)
-        normalize_log_weights(lw, w)
-        weighted_estimate(xx, w, -1, 0.0, mean[:2], v[:2], cov)
-        resample_indices(SYSTEMATIC, w, s["uni"], idx)
-        apply_resample(xx, idx, scratch[:, :2].copy())
-
-    def loose_numpy():
-        xx = propagate_loose_numpy(xl, d0[0], d0[1], s["noise"][:, :3], 0.1, 0.5)
-        lq, _ = loglik_loose_numpy(xx, offsets, nav.pos[upd[k + 1], 2], *z, 1.0, 5.0)
-        ww, _ = normalize_log_weights_numpy(lq)
-        weighted_estimate_numpy(xx, ww, -1, 0.0)
-        xx = xx[resample_indices_numpy(SYSTEMATIC, ww, s["uni"])]
-
-    steps = {}
-    for name, jit, ref_fn in (("tight-dvl", tight_jit, tight_numpy), ("loose-dvl", loose_jit, loose_numpy)):
-        j, r = _best(jit, reps)[0], _best(ref_fn, max(3, reps // 5))[0]
-        steps[name] = {"step_jit_us": round(j * 1e6, 1), "step_numpy_us": round(r * 1e6, 1),
-                       "numpy_ratio": round(r / j, 1)}
-    _ = nb  # numba is imported for the helpers' compilation below
-    return {"kernels": out, "steps": steps}
+    return jit, numpy
 
 
-def _jitted_helpers():
-    import numba as nb
+def _pmf_step(s, cells: int):
+    """One heading slice of the point-mass filter: its nodes, the likelihood there, the blur, the moments."""
+    from tanbench.filters import likelihood as L
+    from tanbench.filters import pmf
+    from tanbench.filters.params import Likelihood
+    from tanbench.terrain.grid import node_grid
 
-    @nb.njit(cache=True)
-    def draw_normals(rng, noise):
-        for j in range(noise.shape[0]):
-            for c in range(noise.shape[1]):
-                noise[j, c] = rng.standard_normal()
+    nmap = s["ctx"].nmap
+    za, grid, plain = nmap.kernel_args(), node_grid(nmap), Likelihood(False, 0, 4.0)
+    ce, cn = float(s["x0"][0].mean()), float(s["x0"][1].mean())
+    p0 = np.random.default_rng(4).random((cells, cells))
+    nodes, ll, buf = np.empty((2, cells * cells)), np.empty(cells * cells), np.empty((cells, cells))
 
-    @nb.njit(cache=True)
-    def draw_uniforms(rng, u):
-        for j in range(u.shape[0]):
-            u[j] = rng.random()
+    def jit():
+        p = p0.copy()
+        pmf.grid_nodes(ce, cn, 2.0, cells, nodes)
+        L.loglik_loose(nodes, s["offsets"], s["up"], grid, plain, SIG_U, OUTSIDE, ll)
+        pmf.blur_separable(p, 0.8, buf)
+        pmf.slice_moments(p, ce, cn, 2.0)
 
-    return draw_normals, draw_uniforms
+    def numpy():
+        q = pmf.grid_nodes_numpy(ce, cn, 2.0, cells)
+        L.loglik_loose_numpy(q, s["offsets"], s["up"], za[0], None, *za[1:], SIG_U, OUTSIDE)
+        p = pmf.blur_separable_numpy(p0, 0.8)
+        pmf.slice_moments_numpy(p, ce, cn, 2.0)
+
+    return jit, numpy
 
 
-_draw_normals, _draw_uniforms = _jitted_helpers()
+def _ekf_step(s):
+    from tanbench.filters import ekf
+
+    za = s["ctx"].nmap.kernel_args()
+    x0 = np.array([s["x0"][0].mean(), s["x0"][1].mean(), 0.01, 0.0])
+    p0 = np.diag([25.0, 25.0, 1e-3, 1e-10])
+    args = (s["offsets"], s["up"], *za, 10.0, SIG_U, 3, 100.0)
+
+    def jit():
+        x, p = x0.copy(), p0.copy()
+        ekf.ekf_predict(x, p, 1.0, 0.5, 0.98, 0.01, 1e-6, 1e-12)
+        ekf.iekf_update(x, p, *args)
+
+    def numpy():
+        x, p = ekf.ekf_predict_numpy(x0, p0, 1.0, 0.5, 0.98, 0.01, 1e-6, 1e-12)
+        ekf.iekf_update_numpy(x, p, *args)
+
+    return jit, numpy
+
+
+def _tercom_step(s, pings: int = 30, half_cells: int = 10):
+    from tanbench.filters import tercom
+
+    za = s["ctx"].nmap.kernel_args()
+    rng = np.random.default_rng(6)
+    pe = s["x0"][0, 0] + np.cumsum(rng.normal(1.0, 0.1, pings))
+    pn = s["x0"][1, 0] + np.cumsum(rng.normal(1.0, 0.1, pings))
+    ph = np.asarray(s["vehicle"].obs.nav.pos[s["upd"][s["k"]], 2] - 30.0 + rng.normal(0, 1, pings))
+    deltas = np.radians(np.linspace(-10, 10, 5))
+    n = 2 * half_cells + 1
+    msd, mad = np.empty((deltas.size, n, n)), np.empty((deltas.size, n, n))
+
+    def jit():
+        tercom.profile_surface(pe, pn, ph, pe[0], pn[0], half_cells, 5.0, deltas, *za, msd, mad)
+        tercom.surface_likelihood_moments(msd, deltas, half_cells, 5.0, pings, SIG_U)
+
+    def numpy():
+        a, _ = tercom.profile_surface_numpy(pe, pn, ph, pe[0], pn[0], half_cells, 5.0, deltas, *za)
+        tercom.surface_likelihood_moments_numpy(a, deltas, half_cells, 5.0, pings, SIG_U)
+
+    return jit, numpy
+
+
+def reference_steps(particles: int = 3000, reps: int = 10) -> dict:
+    """For every built-in method, one update of its kernels against the same update of their
+    plain-numpy references: microseconds each and the ratio numpy / jitted."""
+    s = bench_state(particles)
+    steps = {"tight-dvl": _pf_step(s, "dvl", False), "tight-sbe": _pf_step(s, "sbe", False),
+             "loose-dvl": _pf_step(s, "dvl", True), "mpf-dvl": _mpf_step(s), "pmf-dvl": _pmf_step(s, 32),
+             "pmf-sbe": _pmf_step(s, 32), "ekf-dvl": _ekf_step(s), "tercom-dvl": _tercom_step(s)}
+    out = {}
+    for name, (jit, ref) in steps.items():
+        j, r = _best(jit, reps)[0], _best(ref, max(2, reps // 5))[0]
+        out[name] = {"step_jit_us": round(j * 1e6, 1), "step_numpy_us": round(r * 1e6, 1),
+                     "numpy_ratio": round(r / j, 1)}
+    return out
 
 
 def calibrated_cost_ns(particles: int = 3000, repeats: int = 2) -> dict[str, float]:
@@ -258,12 +378,13 @@ def calibrated_cost_ns(particles: int = 3000, repeats: int = 2) -> dict[str, flo
 
 def run_bench(particles: int = 3000, repeats: int = 3, methods=None) -> dict:
     """Measure and return every figure as a dict."""
-    from tanbench.methods.registry import builtin_names, names
+    from tanbench.methods.registry import names
 
     methods = list(methods or names())
     runs = []
     for method in methods:
         runs.append(run_figures(method, particles, repeats))
-        if method in builtin_names():
-            runs.append(run_figures(method, particles, repeats, "fast"))
-    return {"particles": particles, "updates": 1191, "runs": runs, **kernel_breakdown(particles)}
+        if method in PARTICLE_FILTERS:
+            runs.append(run_figures(method, particles, repeats, "numpy"))
+    return {"particles": particles, "updates": 1191, "runs": runs, "steps": reference_steps(particles),
+            "kernels": kernel_breakdown(particles)}

@@ -525,23 +525,24 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
         typer.echo(json.dumps(figures))
         return
     typer.echo(f"area A, 10 m map, 4 DVL beams, {figures['particles']} particles, {figures['updates']} updates "
-               f"(ns per particle-step: thread CPU / wall; best of {repeats})")
-    base = {}
+               f"(ns per cost unit: particle-step, grid cell, match or update; thread CPU / wall; best of {repeats})")
+    numpy_cpu = {r["method"]: r["ns_per_unit_cpu"] for r in figures["runs"] if r["random_numbers"] == "numpy"}
     for r in figures["runs"]:
-        key = (r["method"], r["random_numbers"])
-        base.setdefault(r["method"], r["ns_per_unit_cpu"])
-        ratio = base[r["method"]] / r["ns_per_unit_cpu"]
         frac = "" if r["resampled_fraction"] is None else f"  resampled {100 * r['resampled_fraction']:.0f} %"
-        typer.echo(f"  {key[0]:<22} random_numbers={key[1]:<5} {r['ns_per_unit_cpu']:7.1f} / "
+        vs = (f"   numpy stream / this = {numpy_cpu[r['method']] / r['ns_per_unit_cpu']:4.2f}"
+              if r["random_numbers"] != "numpy" and r["method"] in numpy_cpu else "")
+        stream = f"random_numbers={r['random_numbers']:<5}" if r["stream"] else " " * 20
+        typer.echo(f"  {r['method']:<12} {stream} {r['ns_per_unit_cpu']:7.1f} / "
                    f"{r['ns_per_unit_wall']:7.1f} ns   run {r['run_wall_s']:6.2f} s "
-                   f"({1e6 * r['run_wall_s'] / figures['updates']:7.1f} us per update)   x{ratio:4.2f} vs numpy{frac}")
+                   f"({1e6 * r['run_wall_s'] / figures['updates']:7.1f} us per update){frac}{vs}")
+    typer.echo("  one update step, jitted kernels against their numpy references:")
     for method, step in figures["steps"].items():
-        typer.echo(f"  {method}: one update step jitted {step['step_jit_us']:.0f} us, numpy reference "
-                   f"{step['step_numpy_us']:.0f} us: numpy / jitted = {step['numpy_ratio']:.1f} x")
+        typer.echo(f"    {method:<12} jitted {step['step_jit_us']:9.0f} us, numpy {step['step_numpy_us']:10.0f} us: "
+                   f"numpy / jitted = {step['numpy_ratio']:6.1f} x")
     for method, kernels in figures["kernels"].items():
-        typer.echo(f"  {method} kernels (ns per particle, thread CPU):")
+        typer.echo(f"  {method} passes (ns per particle, thread CPU, a mid-run cloud):")
         for name, ns in kernels.items():
-            typer.echo(f"    {name:<36} {ns:7.1f}")
+            typer.echo(f"    {name:<58} {ns:7.1f}")
 
 
 def _usage_error_types() -> tuple[type, ...]:

@@ -51,7 +51,7 @@ def beam_offsets(rng, k=1, m=4, nan_rows=()):
 # ---------------------------------------------------------------- point-mass filter
 def test_pmf_grid_kernels_match_numpy(rng):
     n = 17
-    out = np.empty((n * n, 2))
+    out = np.empty((2, n * n))
     pmf.grid_nodes(100.5, -20.0, 2.5, n, out)
     np.testing.assert_allclose(out, pmf.grid_nodes_numpy(100.5, -20.0, 2.5, n), **TOL)
     p = rng.random((n, n))
@@ -182,30 +182,31 @@ def test_tercom_surface_off_map_is_infinite(rough_map):
 
 # ---------------------------------------------------------------- marginalized PF
 def mpf_cloud(rng, m=64):
-    x = np.empty((m, mpf.N_MPF))
-    x[:, mpf.E] = rng.uniform(600, 1400, m)
-    x[:, mpf.N] = rng.uniform(600, 1400, m)
-    x[:, mpf.PSI] = 0.4 + rng.normal(0, 0.5, m)
-    x[:, mpf.B] = rng.normal(0, 1, m)
-    x[:, mpf.PB] = rng.uniform(0.1, 4.0, m)
-    x[:, mpf.EPS] = rng.normal(0, 1e-4, m)
-    x[:, mpf.PEPS] = rng.uniform(1e-10, 1e-8, m)
+    """An MPF cloud (7, M), a column per particle."""
+    x = np.empty((mpf.N_MPF, m))
+    x[mpf.E] = rng.uniform(600, 1400, m)
+    x[mpf.N] = rng.uniform(600, 1400, m)
+    x[mpf.PSI] = 0.4 + rng.normal(0, 0.5, m)
+    x[mpf.B] = rng.normal(0, 1, m)
+    x[mpf.PB] = rng.uniform(0.1, 4.0, m)
+    x[mpf.EPS] = rng.normal(0, 1e-4, m)
+    x[mpf.PEPS] = rng.uniform(1e-10, 1e-8, m)
     return x
 
 
 def test_mpf_kernels_match_numpy(rough_map, rng):
     zargs = rough_map.kernel_args()
     x = mpf_cloud(rng)
-    x[0, mpf.E] = 1.0  # footprints off the map
+    x[mpf.E, 0] = 1.0  # footprints off the map
     inc = rng.normal(0, 1, N_INCREMENTS)
     inc[SZ] = 0.98
-    noise = rng.standard_normal((len(x), 3))
+    noise = rng.standard_normal((3, x.shape[1]))
     xk = x.copy()
     mpf.mpf_propagate(xk, inc, 0.35, noise, 0.07, 1e-7, 1e-12, 1e-6)
     np.testing.assert_allclose(xk, mpf.mpf_propagate_numpy(x, inc, 0.35, noise, 0.07, 1e-7, 1e-12, 1e-6), **TOL)
     offs = beam_offsets(rng, nan_rows=[(0, 1)])[0]
     xl = x.copy()
-    out = np.empty(len(x))
+    out = np.empty(x.shape[1])
     best = mpf.mpf_loglik_update(xl, offs, -20.0, 0.4, *zargs, 1.0, 5.0, out)
     ll_r, best_r, x_r = mpf.mpf_loglik_update_numpy(x, offs, -20.0, 0.4, *zargs, 1.0, 5.0)
     np.testing.assert_allclose(out, ll_r, **TOL)
@@ -218,20 +219,20 @@ def test_mpf_depth_bias_kalman_filter_finds_the_bias(rough_map, rng):
     Gaussian posterior does and its variance shrinks as 1 / (1 / P0 + k m / sigma^2)."""
     zargs = rough_map.kernel_args()
     x = mpf_cloud(rng, 8)
-    x[:, mpf.PSI] = 0.0
-    x[:, mpf.B] = 0.0
-    x[:, mpf.PB] = 4.0
+    x[mpf.PSI] = 0.0
+    x[mpf.B] = 0.0
+    x[mpf.PB] = 4.0
     out = np.empty(8)
     for k in range(20):
         offs = beam_offsets(rng)[0]
         # nu = up + o_up - h = bias, with up = -20 m
-        offs[:, 2] = rough_map.elevation(x[0, mpf.E] + offs[:, 0], x[0, mpf.N] + offs[:, 1]) + 20.0 + 2.5
-        x[:, mpf.E] = x[0, mpf.E]
-        x[:, mpf.N] = x[0, mpf.N]
+        offs[:, 2] = rough_map.elevation(x[mpf.E, 0] + offs[:, 0], x[mpf.N, 0] + offs[:, 1]) + 20.0 + 2.5
+        x[mpf.E] = x[mpf.E, 0]
+        x[mpf.N] = x[mpf.N, 0]
         mpf.mpf_loglik_update(x, offs, -20.0, 0.0, *zargs, 1.0, 5.0, out)
     # noise-free measurements of 2.5 m against the N(0, 4) prior: the posterior mean 2.5 * 80 / (1/4 + 80)
-    assert x[0, mpf.B] == pytest.approx(2.5 * 80.0 / (0.25 + 80.0), rel=1e-9)
-    assert x[0, mpf.PB] == pytest.approx(1.0 / (1.0 / 4.0 + 80.0), rel=1e-9)
+    assert x[mpf.B, 0] == pytest.approx(2.5 * 80.0 / (0.25 + 80.0), rel=1e-9)
+    assert x[mpf.PB, 0] == pytest.approx(1.0 / (1.0 / 4.0 + 80.0), rel=1e-9)
 
 
 def test_beam_projection_matches_numpy(rng):

@@ -265,14 +265,16 @@ def test_start_at_truth_stays(method):
 # settings are the defaults
 PAPER_READING = dict(map_aware_likelihood=False, likelihood="gaussian", loose_architecture="fix-only",
                      keep_on_map=False, divergence_spread_m=None)
-NOISE_FREE_WORSE = ("issue 12: with the recommended map-aware Student-t likelihood, noise-free ranges end "
-                    "worse than 1 m noise in these 120 s, 400-particle runs; not investigated yet")
+# runs per noise level. First written with 6; the recommended tight-sbe and loose-dvl then failed
+# and were marked as expected failures. Measured on 48 runs with the code before the vectorised
+# passes and with it, blocks of 6 runs passed or failed by luck (a few lost runs decide a
+# 6-run mean: each code gave 2 or 3 failing blocks of 8 for each of the two methods), while the
+# 48 runs pass for both, with both codes.
+# The statistic and the threshold are the original ones.
+NOISE_FREE_RUNS = 48
 
 
-@pytest.mark.parametrize("settings, method", [("paper", m) for m in METHODS] + [
-    ("recommended", m) if m not in ("tight-sbe", "loose-dvl") else
-    pytest.param("recommended", m, marks=pytest.mark.xfail(strict=True, reason=NOISE_FREE_WORSE))
-    for m in METHODS])
+@pytest.mark.parametrize("settings, method", [(s, m) for s in ("paper", "recommended") for m in METHODS])
 def test_zero_range_noise_no_worse(settings, method):
     """noise_m = 0 runs (no zero-variance trouble) and is not worse than 1 m noise on the same
     vehicle runs (common random numbers: noise_m is not part of the world)."""
@@ -280,7 +282,7 @@ def test_zero_range_noise_no_worse(settings, method):
     noisy, clean = short_scenario(noise_m=1.0, filter=f), short_scenario(noise_m=0.0, filter=f)
     assert noisy.world_key() == clean.world_key()
     errs = {0.0: [], 1.0: []}
-    for k in range(6):
+    for k in range(NOISE_FREE_RUNS):
         for sc in (noisy, clean):
             v = simulate_vehicle(sc, vseed(k))
             r = run_method(sc, method, v, fseed(k, method))
@@ -380,7 +382,7 @@ def test_all_weight_on_one_particle(scheme):
     zero variance, and regularising the collapsed cloud stays finite."""
     rng = np.random.default_rng(5)
     m = 300
-    x = rng.normal(size=(m, N_TIGHT))
+    x = rng.normal(size=(N_TIGHT, m))  # a column per particle
     logw = np.full(m, -np.inf)
     logw[42] = 0.0
     w = np.empty(m)
@@ -390,7 +392,7 @@ def test_all_weight_on_one_particle(scheme):
     idx = np.empty(m, dtype=np.int64)
     rs.resample_indices(RESAMPLING[scheme], w, rng.random(m), idx)
     assert (idx == 42).all()
-    target = x[42].copy()
+    target = x[:, 42].copy()
     rs.apply_resample(x, idx, np.empty_like(x))
     mean, var, cov = np.empty(N_TIGHT), np.empty(N_TIGHT), np.empty((2, 2))
     weighted_estimate(x, np.full(m, 1.0 / m), YAW, target[YAW], mean, var, cov)

@@ -160,17 +160,17 @@ def test_transition_matches_brute_force_propagation():
     upd = np.array([0, 1000])
     inc = compute_increments(1 / rate, pos, pitch, roll, yaw, upd)
     F, _ = transition(inc, model(states="full", bias_std=1e-4))
-    x0 = np.zeros((1, N_TIGHT))
-    x0[0, 5] = yaw[0]
-    cols = {2: 5, 3: 6, 4: 7}  # bound state -> filter state column (psi, eps_x, eps_z)
+    x0 = np.zeros((N_TIGHT, 1))  # one particle (a column)
+    x0[5, 0] = yaw[0]
+    cols = {2: 5, 3: 6, 4: 7}  # bound state -> filter state (psi, eps_x, eps_z)
     h = 1e-6
     for s, c in cols.items():
         xp, xm = x0.copy(), x0.copy()
-        xp[0, c] += h
-        xm[0, c] -= h
-        yp, _ = propagate_tight_numpy(xp, inc[0], yaw[0], np.zeros((1, 6)), 0, 0, 0, DIST_NONE)
-        ym, _ = propagate_tight_numpy(xm, inc[0], yaw[0], np.zeros((1, 6)), 0, 0, 0, DIST_NONE)
-        fd = (yp[0, [0, 1, 5]] - ym[0, [0, 1, 5]]) / (2 * h)
+        xp[c, 0] += h
+        xm[c, 0] -= h
+        yp, _ = propagate_tight_numpy(xp, inc[0], yaw[0], np.zeros((6, 1)), 0, 0, 0, DIST_NONE)
+        ym, _ = propagate_tight_numpy(xm, inc[0], yaw[0], np.zeros((6, 1)), 0, 0, 0, DIST_NONE)
+        fd = (yp[[0, 1, 5], 0] - ym[[0, 1, 5], 0]) / (2 * h)
         np.testing.assert_allclose(F[0, :3, s], fd, rtol=1e-5, atol=1e-9)
 
 

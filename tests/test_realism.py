@@ -16,6 +16,7 @@ import pytest
 from filters_support import KERNEL_SEED, VEHICLE_SEED, filter_seed, short_scenario, vehicle_seed
 from tanbench.config import Scenario
 from tanbench.filters import likelihood as lik
+from tanbench.filters.params import Likelihood
 from tanbench.methods import run_method
 from tanbench.scoring import recovery_stats
 from tanbench.filters.state import E, N, N_TIGHT, PITCH, ROLL, U, YAW
@@ -25,6 +26,7 @@ from tanbench.options import LIKELIHOOD
 from tanbench.simulation import simulate_vehicle
 from tanbench.terrain import navigation_map
 from tanbench.terrain.derive import map_error_field
+from tanbench.terrain.grid import node_grid, node_grid_of
 from tanbench.terrain.representation import (map_variance_grid, representation_variance,
                                               representation_variance_numpy)
 
@@ -152,13 +154,14 @@ def test_representation_variance_matches_numpy_and_a_plane(world):
 
 
 def _cloud(rng, nmap, m=301):
-    x = np.zeros((m, N_TIGHT))
-    x[:, E] = rng.uniform(nmap.e0 - 50, nmap.e_max + 50, m)  # some footprints off the map
-    x[:, N] = rng.uniform(nmap.n0 - 50, nmap.n_max + 50, m)
-    x[:, U] = rng.uniform(-60, -20, m)
-    x[:, PITCH] = rng.normal(0, 0.05, m)
-    x[:, ROLL] = rng.normal(0, 0.05, m)
-    x[:, YAW] = rng.uniform(-7, 7, m)
+    """A tight cloud (8, M), a column per particle."""
+    x = np.zeros((N_TIGHT, m))
+    x[E] = rng.uniform(nmap.e0 - 50, nmap.e_max + 50, m)  # some footprints off the map
+    x[N] = rng.uniform(nmap.n0 - 50, nmap.n_max + 50, m)
+    x[U] = rng.uniform(-60, -20, m)
+    x[PITCH] = rng.normal(0, 0.05, m)
+    x[ROLL] = rng.normal(0, 0.05, m)
+    x[YAW] = rng.uniform(-7, 7, m)
     return x
 
 
@@ -168,16 +171,17 @@ def test_loglik_tight_mapaware_matches_numpy(world, kind):
     rng = np.random.default_rng([KERNEL_SEED, 130, LIKELIHOOD[kind]])
     mvar = map_variance_grid(nmap, 0.2887, 0.4)
     za = nmap.kernel_args()
+    grid = node_grid(nmap, mvar)
     for ping in rng.integers(0, v.obs.dvl_ranges.shape[0], 3):
         x = _cloud(rng, nmap)
         ranges = v.obs.dvl_ranges[ping].copy()
         ranges[rng.integers(0, 4)] = np.nan
-        dist = rng.normal(0, 0.3, (x.shape[0], 2))
-        out = np.empty(x.shape[0])
-        best = lik.loglik_tight_mapaware(x, v.obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0, dist, 0.1,
-                                         0.0, 0.0, 0.0, LIKELIHOOD[kind], 4.0, out)
-        ref, best_ref = lik.loglik_tight_mapaware_numpy(x, v.obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0,
-                                                        dist, 0.1, LIKELIHOOD[kind], 4.0)
+        dist = rng.normal(0, 0.3, (2, x.shape[1]))
+        out = np.empty(x.shape[1])
+        best = lik.loglik_tight(x, v.obs.dvl_beams, ranges, grid, Likelihood(True, LIKELIHOOD[kind], 4.0), 1.0, 5.0,
+                                dist, 0.1, True, 0.0, 0.0, 0.0, out)
+        ref, best_ref = lik.loglik_tight_numpy(x, v.obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0,
+                                               dist, 0.1, True, LIKELIHOOD[kind], 4.0)
         np.testing.assert_allclose(out, ref, **TOL)
         assert best == pytest.approx(best_ref, rel=1e-9)
 
@@ -187,13 +191,13 @@ def test_mapaware_gaussian_with_zero_variance_is_the_plain_kernel(world):
     _, v, nmap = world
     rng = np.random.default_rng([KERNEL_SEED, 131])
     zero = np.where(np.isnan(nmap.z), np.nan, 0.0)
-    za = nmap.kernel_args()
     x = _cloud(rng, nmap)
-    dist = rng.normal(0, 0.3, (x.shape[0], 2))
-    a, b = np.empty(x.shape[0]), np.empty(x.shape[0])
-    best_a = lik.loglik_tight(x, v.obs.dvl_beams, v.obs.dvl_ranges[100], *za, 1.3, 5.0, dist, 0.1, 0.0, 0.0, 0.0, a)
-    best_b = lik.loglik_tight_mapaware(x, v.obs.dvl_beams, v.obs.dvl_ranges[100], za[0], zero, *za[1:], 1.3, 5.0, dist,
-                                       0.1, 0.0, 0.0, 0.0, lik.LIK_GAUSSIAN, 4.0, b)
+    dist = rng.normal(0, 0.3, (2, x.shape[1]))
+    a, b = np.empty(x.shape[1]), np.empty(x.shape[1])
+    best_a = lik.loglik_tight(x, v.obs.dvl_beams, v.obs.dvl_ranges[100], node_grid(nmap),
+                              Likelihood(False, lik.LIK_GAUSSIAN, 4.0), 1.3, 5.0, dist, 0.1, True, 0.0, 0.0, 0.0, a)
+    best_b = lik.loglik_tight(x, v.obs.dvl_beams, v.obs.dvl_ranges[100], node_grid(nmap, zero),
+                              Likelihood(True, lik.LIK_GAUSSIAN, 4.0), 1.3, 5.0, dist, 0.1, True, 0.0, 0.0, 0.0, b)
     np.testing.assert_allclose(a, b, **TOL)
     assert best_a == pytest.approx(best_b, rel=1e-12)
 
@@ -204,14 +208,14 @@ def test_loglik_loose_mapaware_matches_numpy(world, kind):
     rng = np.random.default_rng([KERNEL_SEED, 132, LIKELIHOOD[kind]])
     mvar = map_variance_grid(nmap, 0.2887, 0.4)
     za = nmap.kernel_args()
-    x = np.ascontiguousarray(_cloud(rng, nmap)[:, :2])
+    x = np.ascontiguousarray(_cloud(rng, nmap)[:2])
     off = np.ascontiguousarray(v.obs.dvl_beams * v.obs.dvl_ranges[200][:, None])
     off[1] = np.nan
-    out = np.empty(x.shape[0])
-    best = lik.loglik_loose_mapaware(x, off, -40.0, za[0], mvar, *za[1:], 1.0, 5.0, LIKELIHOOD[kind],
-                                     4.0, out)
-    ref, best_ref = lik.loglik_loose_mapaware_numpy(x, off, -40.0, za[0], mvar, *za[1:], 1.0, 5.0,
-                                                    LIKELIHOOD[kind], 4.0)
+    out = np.empty(x.shape[1])
+    best = lik.loglik_loose(x, off, -40.0, node_grid(nmap, mvar), Likelihood(True, LIKELIHOOD[kind], 4.0), 1.0, 5.0,
+                            out)
+    ref, best_ref = lik.loglik_loose_numpy(x, off, -40.0, za[0], mvar, *za[1:], 1.0, 5.0, True,
+                                           LIKELIHOOD[kind], 4.0)
     np.testing.assert_allclose(out, ref, **TOL)
     assert best == pytest.approx(best_ref, rel=1e-9)
 
@@ -219,8 +223,8 @@ def test_loglik_loose_mapaware_matches_numpy(world, kind):
 def test_student_t_bounds_the_pull_of_an_outlier():
     """Reference-free: a 30-sigma range costs a Gaussian 450 log units, a Student-t (nu = 4)
     5/2 log(1 + 900/4) = 13.6."""
-    g = lik._beam_logpdf_numpy(np.array(900.0), 1.0, 1.0, lik.LIK_GAUSSIAN, 4.0)
-    t = lik._beam_logpdf_numpy(np.array(900.0), 1.0, 1.0, lik.LIK_STUDENT, 4.0)
+    g = lik._beam_logpdf_numpy(np.array(900.0), 1.0, 1.0, True, lik.LIK_GAUSSIAN, 4.0)
+    t = lik._beam_logpdf_numpy(np.array(900.0), 1.0, 1.0, True, lik.LIK_STUDENT, 4.0)
     assert g == pytest.approx(-450.0)
     assert t == pytest.approx(-2.5 * math.log(226.0), rel=1e-12)
 
@@ -232,14 +236,15 @@ def test_steep_map_weighs_less():
     z[:, 10:] = np.arange(10) * 5.0  # 0.5 slope east of the middle, flat west
     mvar = np.empty_like(z)
     representation_variance(z, 10.0, 10.0, 0.2887, 0.0, mvar)
-    x = np.array([[35.0, 100.0], [165.0, 100.0]])  # flat, steep
+    x = np.array([[35.0, 165.0], [100.0, 100.0]])  # flat, steep (a column each)
     off = np.array([[0.0, 0.0, -30.0]])
     up = np.array([30.0 + 3.0, 30.0 + np.interp(165.0, np.arange(20) * 10.0, z[10]) + 3.0])  # 3 m innovation
     out = np.empty(1)
+    grid = node_grid_of(z, 0.0, 0.0, 0.1, 0.1, z2=mvar)
     lls = []
     for j in range(2):
-        lik.loglik_loose_mapaware(x[j:j + 1], off, up[j], z, mvar, 0.0, 0.0, 0.1, 0.1, 1.0, 5.0,
-                                  lik.LIK_GAUSSIAN, 4.0, out)
+        lik.loglik_loose(np.ascontiguousarray(x[:, j:j + 1]), off, up[j], grid, Likelihood(True, lik.LIK_GAUSSIAN, 4.0),
+                         1.0, 5.0, out)
         lls.append(out[0])
     assert lls[1] > lls[0]
 
@@ -372,15 +377,20 @@ def test_correlated_map_error_field():
 # the closed-loop loose TAN
 # --------------------------------------------------------------------------------------
 def test_kalman_feedback_corrects_the_heading_fix_only_does_not():
-    """Area A, 600 s, 1500 particles, 3 runs: the closed loop ends within 5 deg of the true
-    heading on average (the navigation system starts 30 deg off), the fix-only variant keeps
-    the navigation heading (> 25 deg)."""
-    runs = 3
+    """Area A, 600 s, 1500 particles: the closed loop ends within 5 deg of the true heading on
+    average (the navigation system starts 30 deg off), the fix-only variant keeps the
+    navigation heading (> 25 deg).
+
+    200 runs (first written with 3): the closed loop loses a run now and then (4 of runs 20-79
+    with the code before the vectorised passes, 5 with it), each ending 8-58 deg off, so the
+    mean over 3 runs passed or failed by luck; over 200 its standard error is about 0.7 deg.
+    The statistic and the threshold are the original ones."""
+    runs = 200
     errs = {"kalman-feedback": [], "fix-only": []}
     for r in range(runs):
+        v = simulate_vehicle(short_scenario(duration_s=600.0), vehicle_seed(r))  # one world for both
         for arch in errs:
             sc = short_scenario(duration_s=600.0, particles=1500, filter=dict(loose_architecture=arch))
-            v = simulate_vehicle(sc, vehicle_seed(r))
             m = run_method(sc, "loose-dvl", v, filter_seed(r, 2)).metrics
             errs[arch].append(m["final_heading_error_deg"])
     assert np.mean(errs["kalman-feedback"]) < 5.0, errs

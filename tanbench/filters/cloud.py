@@ -1,27 +1,43 @@
-"""The initial horizontal cloud read as a Gaussian (``filter.initial_cloud: gaussian``).
+"""The initial clouds: a uniform square (Section 4.3) or, read from Table 2's initial
+covariance ``diag(150 m, 150 m, ...)^2``, a Gaussian (``filter.initial_cloud: gaussian``).
 
-Section 4.3 says the initial distribution is uniform over 150 m x 150 m (the default,
-drawn by ``init_tight`` / ``init_loose``); Table 2's initial covariance
-``diag(150 m, 150 m, ...)^2`` can also be read as a Gaussian with a 150 m standard
-deviation. This kernel redraws the east and north columns that way.
+Particles are the columns of ``x`` (rows 0 and 1: east, north); the draws are block fills
+(``rng.fill_uniforms``, ``rng.fill_normals``), east row then north row.
 """
 
 from __future__ import annotations
 
 import numba as nb
 
+from tanbench.filters import FASTMATH
+from tanbench.filters.rng import fill_normals, fill_uniforms
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _scale_shift(row, scale, shift):
+    for j in range(row.shape[0]):
+        row[j] = shift + scale * row[j]
+
+
+@nb.njit(cache=True)
+def uniform_horizontal(x, rng, centre_e, centre_n, half_side):
+    """Rows 0, 1 (east, north) of ``x`` uniform in the square of side 2 * half_side around the centre."""
+    fill_uniforms(rng, x[0:2], -half_side, half_side)
+    _scale_shift(x[0], 1.0, centre_e)
+    _scale_shift(x[1], 1.0, centre_n)
+
 
 @nb.njit(cache=True)
 def gaussian_horizontal(x, rng, centre_e, centre_n, std):
-    """Replace columns 0, 1 (east, north) of ``x`` by N(centre, std^2) draws, east then north per row."""
-    for j in range(x.shape[0]):
-        x[j, 0] = centre_e + std * rng.standard_normal()
-        x[j, 1] = centre_n + std * rng.standard_normal()
+    """Replace rows 0, 1 (east, north) of ``x`` by N(centre, std^2) draws, the east row first."""
+    fill_normals(rng, x[0:2])
+    _scale_shift(x[0], std, centre_e)
+    _scale_shift(x[1], std, centre_n)
 
 
 def gaussian_horizontal_numpy(x, normals, centre_e, centre_n, std):
-    """Plain-numpy reference: ``normals`` (M, 2) are the standard normals the kernel would draw."""
+    """Plain-numpy reference: ``normals`` (2, M) are the standard normals the kernel would draw."""
     x = x.copy()
-    x[:, 0] = centre_e + std * normals[:, 0]
-    x[:, 1] = centre_n + std * normals[:, 1]
+    x[0] = centre_e + std * normals[0]
+    x[1] = centre_n + std * normals[1]
     return x

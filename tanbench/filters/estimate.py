@@ -1,8 +1,14 @@
 """The filter's estimate: weighted mean (MMSE) and weighted covariance of the particles.
 
-The yaw column is averaged as an angle: deviations from ``yaw_ref`` are wrapped to
-(-pi, pi] before weighting, so a cloud straddling +-180 deg averages correctly; the
-returned mean yaw is unwrapped around ``yaw_ref``.
+Particles are the columns of ``x`` (a row per state). The yaw row is averaged as an
+angle: deviations from ``yaw_ref`` are wrapped to (-pi, pi] before weighting, so a cloud
+straddling +-180 deg averages correctly; the returned mean yaw is unwrapped around
+``yaw_ref``.
+
+The sums run over four interleaved accumulators, added in a fixed order at the end: four
+independent chains keep the adder busy (a single chain waits on each addition), and the
+order, hence every last bit, is the same on every machine and in every process (a
+vectorising compiler would choose the order by the machine's vector width).
 """
 
 from __future__ import annotations
@@ -15,59 +21,94 @@ import numpy as np
 from tanbench.filters import FASTMATH
 
 
-@nb.njit(cache=True, fastmath=FASTMATH)
-def weighted_estimate(x, w, yaw_col, yaw_ref, mean, var, cov_en):
-    """Fill ``mean``/``var`` (ncols,) and ``cov_en`` (2, 2) from particles ``x`` and weights ``w``.
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _wrap(a):
+    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
 
-    One pass of weighted first and second moments about the first particle (shifting
-    keeps the sums small, so E[x^2] - E[x]^2 loses no precision at map coordinates).
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _deviation(v, ref, angle):
+    return _wrap(v - ref) if angle else v - ref
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def weighted_moments(row, w, ref, angle):
+    """(sum w d, sum w d^2) of the deviations d = row - ref (wrapped, if ``angle``)."""
+    m = row.shape[0]
+    m4 = m - m % 4
+    a0 = a1 = a2 = a3 = 0.0
+    b0 = b1 = b2 = b3 = 0.0
+    for j in range(0, m4, 4):
+        d0 = _deviation(row[j], ref, angle)
+        d1 = _deviation(row[j + 1], ref, angle)
+        d2 = _deviation(row[j + 2], ref, angle)
+        d3 = _deviation(row[j + 3], ref, angle)
+        a0 += w[j] * d0
+        a1 += w[j + 1] * d1
+        a2 += w[j + 2] * d2
+        a3 += w[j + 3] * d3
+        b0 += w[j] * d0 * d0
+        b1 += w[j + 1] * d1 * d1
+        b2 += w[j + 2] * d2 * d2
+        b3 += w[j + 3] * d3 * d3
+    for j in range(m4, m):
+        d = _deviation(row[j], ref, angle)
+        a0 += w[j] * d
+        b0 += w[j] * d * d
+    return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def weighted_cross(xe, xn, w, ref_e, ref_n):
+    """sum w (xe - ref_e) (xn - ref_n)."""
+    m = w.shape[0]
+    m4 = m - m % 4
+    a0 = a1 = a2 = a3 = 0.0
+    for j in range(0, m4, 4):
+        a0 += w[j] * (xe[j] - ref_e) * (xn[j] - ref_n)
+        a1 += w[j + 1] * (xe[j + 1] - ref_e) * (xn[j + 1] - ref_n)
+        a2 += w[j + 2] * (xe[j + 2] - ref_e) * (xn[j + 2] - ref_n)
+        a3 += w[j + 3] * (xe[j + 3] - ref_e) * (xn[j + 3] - ref_n)
+    for j in range(m4, m):
+        a0 += w[j] * (xe[j] - ref_e) * (xn[j] - ref_n)
+    return (a0 + a1) + (a2 + a3)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
+def weighted_estimate(x, w, yaw_row, yaw_ref, mean, var, cov_en):
+    """Fill ``mean``/``var`` (nrows,) and ``cov_en`` (2, 2) from particles ``x`` (nrows, M) and
+    normalised weights ``w``.
+
+    Weighted first and second moments about the first particle (shifting keeps the sums
+    small, so E[x^2] - E[x]^2 loses no precision at map coordinates); the yaw row
+    (``yaw_row`` >= 0) about ``yaw_ref``, wrapped.
     """
-    m, nc = x.shape
-    ref = np.empty(nc)
-    for c in range(nc):
-        ref[c] = x[0, c]
-        mean[c] = 0.0
-        var[c] = 0.0
-    if yaw_col >= 0:
-        ref[yaw_col] = 0.0
-    cen = 0.0
-    for j in range(m):
-        wj = w[j]
-        for c in range(nc):
-            if c == yaw_col:
-                v = _wrap(x[j, c] - yaw_ref)
-            else:
-                v = x[j, c] - ref[c]
-            mean[c] += wj * v
-            var[c] += wj * v * v
-        cen += wj * (x[j, 0] - ref[0]) * (x[j, 1] - ref[1])
-    for c in range(nc):
-        var[c] = max(var[c] - mean[c] * mean[c], 0.0)
-    cen -= mean[0] * mean[1]
-    for c in range(nc):
-        mean[c] += ref[c]
-    if yaw_col >= 0:
-        mean[yaw_col] += yaw_ref
+    for c in range(x.shape[0]):
+        angle = c == yaw_row
+        ref = yaw_ref if angle else x[c, 0]
+        s1, s2 = weighted_moments(x[c], w, ref, angle)
+        mean[c] = s1
+        var[c] = max(s2 - s1 * s1, 0.0)
+    ref_e = x[0, 0]
+    ref_n = x[1, 0]
+    cen = weighted_cross(x[0], x[1], w, ref_e, ref_n) - mean[0] * mean[1]
+    for c in range(x.shape[0]):
+        mean[c] += yaw_ref if c == yaw_row else x[c, 0]
     cov_en[0, 0] = var[0]
     cov_en[1, 1] = var[1]
     cov_en[0, 1] = cen
     cov_en[1, 0] = cen
 
 
-@nb.njit(cache=True, inline="always")
-def _wrap(a):
-    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
-
-
-def weighted_estimate_numpy(x, w, yaw_col, yaw_ref):
-    """Plain-numpy reference: (mean, var, cov_en)."""
+def weighted_estimate_numpy(x, w, yaw_row, yaw_ref):
+    """Plain-numpy reference: (mean, var, cov_en); ``x`` (nrows, M)."""
     v = x.copy()
-    if yaw_col >= 0:
-        v[:, yaw_col] = (v[:, yaw_col] - yaw_ref + np.pi) % (2 * np.pi) - np.pi
-    mean = w @ v
-    d = v - mean
-    var = w @ (d * d)
-    cen = w @ (d[:, 0] * d[:, 1])
-    if yaw_col >= 0:
-        mean[yaw_col] += yaw_ref
+    if yaw_row >= 0:
+        v[yaw_row] = (v[yaw_row] - yaw_ref + np.pi) % (2 * np.pi) - np.pi
+    mean = v @ w
+    d = v - mean[:, None]
+    var = (d * d) @ w
+    cen = (d[0] * d[1]) @ w
+    if yaw_row >= 0:
+        mean[yaw_row] += yaw_ref
     return mean, var, np.array([[var[0], cen], [cen, var[1]]])

@@ -2,72 +2,87 @@
 
 For beam i with unit vector a_i (body frame) and measured range r_i, a particle with
 attitude Theta predicts the bottom at its position plus C_b^n(Theta) a_i r_i (Eqs. 15,
-17); the innovation is the predicted bottom's height minus the navigation map's height
-under it. Eq. 20's |R| is read as per-component variances, so
+17); the innovation d_i is the predicted bottom's height minus the navigation map's
+height under it. Eq. 20's |R| is read as per-component variances. Two densities per beam:
 
-    log p(y | x) = -1/2 [ (dE^2 + dN^2) / sigma_d^2 + sum_i dU_i^2 / sigma_U^2 ] + const.
+* plain (the paper's reading): Gaussian with the sonar's variance sigma_U^2,
+      log p = -1/2 [ (dE^2 + dN^2) / sigma_d^2 + sum_i d_i^2 / sigma_U^2 ] + const;
+* map-aware (docs/model.md, Section 6.3): each beam's variance is the sonar's plus the
+  navigation map's variance at the footprint, v_i = sigma_U^2 + m_i (a second grid on the
+  map's nodes, ``terrain/representation.py``), and, because v_i depends on where a particle
+  puts the footprint, its log-normaliser stays in:
+      Gaussian:  log p_i = -1/2 [ d_i^2 / v_i + log(v_i / sigma_U^2) ]
+      Student-t: log p_i = -(nu + 1)/2 log(1 + d_i^2 / (nu v_i)) - 1/2 log(v_i / sigma_U^2)
+  (constants dropped; the Student-t's heavy tails bound the pull of one wild range).
 
-Log-likelihoods are returned, never raw likelihoods, so nothing underflows. A beam
-whose footprint falls off the map (NaN) is charged ``outside_sigma`` sigmas; a beam
-without a range (no bottom lock, NaN) is skipped. Each kernel returns the smallest
-per-beam mean squared normalised terrain innovation over the particles, the
-filter's divergence statistic.
+Log-likelihoods are returned, never raw likelihoods, so nothing underflows. A beam whose
+footprint falls off the map (or next to a NaN node) is charged ``outside_sigma`` sigmas
+with the sonar's variance; a beam without a range (no bottom lock, NaN) is skipped. Each
+kernel returns the smallest per-beam mean of d_i^2 / v_i over the particles, the filter's
+divergence statistic.
+
+Particles are columns of ``x`` (rows are states). The work runs beam by beam over all
+particles in passes that compile to SIMD instructions (``attitude_matrices``,
+``tight_footprints``/``loose_footprints``, ``add_beam_terms``, ``finish_loglik``); the one
+scalar pass is the copy of the cells' corners (``terrain.grid.gather_cells``). The map-aware beams'
+logs are taken of products: one log per particle for the normalisers and one for the
+Student-t factors, every :data:`FOLD_BEAMS` beams (each factor is at least 1 and below
+about 1e38, so a product of that many stays finite).
 """
 
 from __future__ import annotations
 
-import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import attitude_reference, particle_sin_cos
+from tanbench.filters.trig import attitude_reference, attitude_sin_cos
+from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
-from tanbench.terrain.grid import bilinear, bilinear_numpy, bilinear_pair, stack_grids
+from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
+
+LIK_GAUSSIAN, LIK_STUDENT = LIKELIHOOD["gaussian"], LIKELIHOOD["student-t"]
+FOLD_BEAMS = 8
+
+# the work arrays of the likelihood passes for one block of the cloud: the filter loops run
+# their particle passes block by block (at most BLOCK particles), so that the arrays one
+# block's passes touch stay in the core's caches. ``dcm`` (9, n) and ``stage`` (corners, n).
+BLOCK = 1000000
+LikelihoodWork = namedtuple("LikelihoodWork", "dcm cell tx ty pu stage norm student chi logs")
+
+
+@nb.njit(cache=True)
+def new_likelihood_work(n, corners):
+    """Work buffers for blocks of up to ``n`` particles and ``corners`` values per cell (4 per
+    map grid); :func:`work_block` shapes them for a block."""
+    return LikelihoodWork(np.empty(9 * n), np.empty(n, dtype=np.int32), np.empty(n), np.empty(n), np.empty(n),
+                          np.empty(corners * n), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+
+
+@nb.njit(cache=True)
+def work_block(work, n):
+    """The work arrays of a block of ``n`` particles, C-contiguous (the passes vectorise only on
+    contiguous rows): views of the buffers of :func:`new_likelihood_work`."""
+    corners = work.stage.shape[0] // work.norm.shape[0]
+    return LikelihoodWork(work.dcm[:9 * n].reshape((9, n)), work.cell[:n], work.tx[:n], work.ty[:n], work.pu[:n],
+                          work.stage[:corners * n].reshape((corners, n)), work.norm[:n], work.student[:n],
+                          work.chi[:n], work.logs[:n])
 
 
 @nb.njit(cache=True, inline="always")
 def beam_constants(sig_u, sig_d, outside_sigma):
-    """(sig_u^2, 1 / sig_u^2, 1 / sig_d^2, (outside_sigma sig_u)^2, outside_sigma^2): the
-    per-update constants of the likelihood kernels.
-
-    This and the ``*_particle`` functions below are inlined into their callers and take the
-    callers' floating-point flags: call them from ``fastmath=FASTMATH`` kernels only (the
-    array kernels here and the filter loops' fused passes), so that the fused passes
-    compute exactly what the array kernels compute."""
-    su2 = sig_u * sig_u
-    return su2, 1.0 / su2, 1.0 / (sig_d * sig_d), (outside_sigma * sig_u) ** 2, outside_sigma * outside_sigma
-
-
-@nb.njit(cache=True, inline="always")
-def _particle_dcm(x, j, att):
-    """C_b^n of particle ``j``'s attitude, each angle as the reference ``att`` plus an offset."""
-    st, ct, sg, cg, sp, cp = particle_sin_cos(x, j, att)
-    return (cg * cp - st * sg * sp, -ct * sp, sg * cp + st * cg * sp,
-            cg * sp + st * sg * cp, ct * cp, sg * sp - st * cg * cp,
-            -ct * sg, st, ct * cg)
-
-
-@nb.njit(cache=True, inline="always")
-def _footprint(x, j, dcm, vec, i):
-    """(east, north, up) of beam ``i``'s footprint (``vec`` from :func:`beam_vectors`) seen from
-    particle ``j`` with its attitude matrix ``dcm`` (:func:`_particle_dcm`)."""
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = dcm
-    a0 = vec[i, 0]
-    a1 = vec[i, 1]
-    a2 = vec[i, 2]
-    return (x[j, E] + c00 * a0 + c01 * a1 + c02 * a2,
-            x[j, N] + c10 * a0 + c11 * a1 + c12 * a2,
-            x[j, U] + c20 * a0 + c21 * a1 + c22 * a2)
+    """(sig_u^2, 1 / sig_d^2, outside_sigma^2): the per-update constants of the likelihood."""
+    return sig_u * sig_u, 1.0 / (sig_d * sig_d), outside_sigma * outside_sigma
 
 
 @nb.njit(cache=True)
 def beam_vectors(beams, ranges):
     """(n, 3) beam vectors times ranges, body frame, of the n beams with a range (not NaN), in
-    beam order: what the per-particle kernels below loop over."""
+    beam order."""
     used = 0
     for i in range(ranges.shape[0]):
         if ranges[i] == ranges[i]:
@@ -82,61 +97,6 @@ def beam_vectors(beams, ranges):
             vec[k, 2] = beams[i, 2] * r
             k += 1
     return vec
-
-
-@nb.njit(cache=True, inline="always")
-def loglik_tight_particle(x, j, vec, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
-                          dist_e, dist_n, inv_d2):
-    """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_tight` (and the fused filter
-    loop): ``vec`` from :func:`beam_vectors`, ``att`` from :func:`attitude_reference`, ``dist_*``
-    its distance innovations."""
-    dcm = _particle_dcm(x, j, att)
-    sq = 0.0
-    for i in range(vec.shape[0]):
-        pe, pn, pu = _footprint(x, j, dcm, vec, i)
-        h = bilinear(z, e0, n0, inv_re, inv_rn, pe, pn)
-        if h == h:
-            sq += (pu - h) * (pu - h)
-        else:
-            sq += outside_sq
-    chi = sq * inv_u2
-    return -0.5 * (chi + (dist_e ** 2 + dist_n ** 2) * inv_d2), chi
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
-def loglik_tight(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                 dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, out):
-    """Fill ``out`` (M,) with each particle's log-likelihood; return the best chi^2 per beam.
-
-    ``ref_*`` (the navigation attitude) only speed up the trigonometry: each particle's
-    angles are evaluated as reference plus a usually small offset (``trig.sin_cos_about``).
-    """
-    vec = beam_vectors(beams, ranges)
-    used = vec.shape[0]
-    _, inv_u2, inv_d2, outside_sq, _ = beam_constants(sig_u, sig_d, outside_sigma)
-    att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
-    best = np.inf
-    for j in range(x.shape[0]):
-        ll, chi = loglik_tight_particle(x, j, vec, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
-                                        dist_innov[j, 0], dist_innov[j, 1], inv_d2)
-        if used > 0 and chi / used < best:
-            best = chi / used
-        out[j] = ll
-    return best
-
-
-def loglik_tight_numpy(x, beams, ranges, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, dist_innov, sig_d):
-    """Plain-numpy reference of :func:`loglik_tight`: returns (loglik (M,), best chi^2 per beam)."""
-    c = dcm_body_to_nav_numpy(x[:, PITCH], x[:, ROLL], x[:, YAW])  # (M, 3, 3)
-    ok = ~np.isnan(ranges)
-    vec = beams[ok] * ranges[ok][:, None]  # (m', 3)
-    p = x[:, None, [E, N, U]] + np.einsum("mij,bj->mbi", c, vec)  # (M, m', 3)
-    h = bilinear_numpy(z, e0, n0, inv_re, inv_rn, p[..., 0], p[..., 1])
-    sq = np.where(np.isnan(h), (outside_sigma * sig_u) ** 2, (p[..., 2] - h) ** 2).sum(axis=1)
-    chi = sq / sig_u**2
-    loglik = -0.5 * (chi + (dist_innov**2).sum(axis=1) / sig_d**2)
-    best = (chi / ok.sum()).min() if ok.any() else np.inf
-    return loglik, best
 
 
 @nb.njit(cache=True)
@@ -158,241 +118,241 @@ def used_offsets(offsets):
 
 
 @nb.njit(cache=True, inline="always")
-def loglik_loose_particle(x, j, offsets, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq):
-    """(log-likelihood, chi^2) of particle ``j`` for :func:`loglik_loose`; ``offsets``: the
-    beams with a range (:func:`used_offsets`)."""
-    sq = 0.0
-    for i in range(offsets.shape[0]):
-        h = bilinear(z, e0, n0, inv_re, inv_rn, x[j, 0] + offsets[i, 0], x[j, 1] + offsets[i, 1])
-        if h == h:
-            d = up + offsets[i, 2] - h
-            sq += d * d
-        else:
-            sq += outside_sq
-    chi = sq * inv_u2
-    return -0.5 * chi, chi
+def _matrix_rows(dcm):
+    """The nine rows of ``dcm`` as 1-D views (loops over views vectorise; see ``propagate._rows``)."""
+    return dcm[0], dcm[1], dcm[2], dcm[3], dcm[4], dcm[5], dcm[6], dcm[7], dcm[8]
 
 
-@nb.njit(cache=True, fastmath=FASTMATH)
-def loglik_loose(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, out):
-    """Loose filter: beams projected once with the navigation attitude, ``offsets`` (m, 3) in m.
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def attitude_matrices(x, lo, att, dcm):
+    """C_b^n of the attitudes of particles ``lo .. lo + n - 1`` into ``dcm`` (9, n), row-major
+    entries c00..c22; the angles as offsets from the reference ``att`` (``trig.attitude_reference``)."""
+    n = dcm.shape[1]
+    pitch, roll, yaw = x[PITCH, lo:lo + n], x[ROLL, lo:lo + n], x[YAW, lo:lo + n]
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
+    for j in range(n):
+        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att)
+        c00[j] = cg * cp - st * sg * sp
+        c01[j] = -ct * sp
+        c02[j] = sg * cp + st * cg * sp
+        c10[j] = cg * sp + st * sg * cp
+        c11[j] = ct * cp
+        c12[j] = sg * sp - st * cg * cp
+        c20[j] = -ct * sg
+        c21[j] = st
+        c22[j] = ct * cg
 
-    Rows of ``offsets`` with NaN are beams without a range and are skipped.
-    """
-    rows = used_offsets(offsets)
-    used = rows.shape[0]
-    _, inv_u2, _, outside_sq, _ = beam_constants(sig_u, 1.0, outside_sigma)
-    best = np.inf
-    for j in range(x.shape[0]):
-        ll, chi = loglik_loose_particle(x, j, rows, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
-        if used > 0 and chi / used < best:
-            best = chi / used
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def tight_footprints(x, lo, dcm, a0, a1, a2, grid, cell, tx, ty, pu):
+    """Beam ``(a0, a1, a2)`` (body frame, times its range) seen from particles ``lo ..``, with
+    their attitude matrices ``dcm`` (9, n): its footprint's map cell (``cell``, -1 off the map),
+    position in the cell (``tx``, ``ty``) and height (``pu``)."""
+    _, _, e0, n0, inv_re, inv_rn, nx, ny = grid
+    n = dcm.shape[1]
+    e, nn, u = x[E, lo:lo + n], x[N, lo:lo + n], x[U, lo:lo + n]
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
+    for j in range(n):
+        pe = e[j] + c00[j] * a0 + c01[j] * a1 + c02[j] * a2
+        pn = nn[j] + c10[j] * a0 + c11[j] * a1 + c12[j] * a2
+        pu[j] = u[j] + c20[j] * a0 + c21[j] * a1 + c22[j] * a2
+        cell[j], tx[j], ty[j] = locate_cell(pe, pn, e0, n0, inv_re, inv_rn, nx, ny)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def loose_footprints(x, lo, oe, on, height, grid, cell, tx, ty, pu):
+    """:func:`tight_footprints` of a beam already in the navigation frame, (oe, on) from the
+    positions of particles ``lo .. lo + n - 1`` (``x`` (2, M); ``n`` the length of ``cell``), at
+    the height ``height``."""
+    _, _, e0, n0, inv_re, inv_rn, nx, ny = grid
+    n = cell.shape[0]
+    e, nn = x[0, lo:lo + n], x[1, lo:lo + n]
+    for j in range(n):
+        pu[j] = height
+        cell[j], tx[j], ty[j] = locate_cell(e[j] + oe, nn[j] + on, e0, n0, inv_re, inv_rn, nx, ny)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def add_beam_terms(stage, grids, cell, tx, ty, pu, su2, out2, mapaware, inv_nu, work):
+    """Add one beam to every particle's terms: ``work.chi`` += d^2 / v and, map-aware, the
+    normaliser product ``work.norm`` *= v / sigma_U^2 and the Student-t product
+    ``work.student`` *= 1 + d^2 / (nu v) (``inv_nu`` = 1 / nu; 0 for the Gaussian, whose
+    factor is then 1). ``stage`` holds the footprints' cell corners of the ``grids`` grids
+    (``terrain.grid.gather_cells``; the variance grid second)."""
+    norm = work.norm
+    student = work.student
+    chi = work.chi
+    inv_su2 = 1.0 / su2
+    heights = cell_corners(stage, 0, grids)
+    variances = cell_corners(stage, 1 if mapaware else 0, grids)
+    for j in range(cell.shape[0]):
+        h = cell_value(heights, j, tx[j], ty[j])
+        mv = cell_value(variances, j, tx[j], ty[j]) if mapaware else 0.0
+        ok = (cell[j] >= 0) & (h == h) & (mv == mv)
+        v = su2 + mv if ok else su2
+        d = pu[j] - h
+        q = d * d / v if ok else out2
+        chi[j] += q
+        norm[j] *= v * inv_su2
+        student[j] *= 1.0 + q * inv_nu
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def fold_beam_terms(work, half_nu1):
+    """Move the products into the log sum: ``logs`` += -1/2 log(norm) - (nu + 1)/2 log(student);
+    the products restart at 1."""
+    for j in range(work.norm.shape[0]):
+        work.logs[j] += -0.5 * log_positive(work.norm[j]) - half_nu1 * log_positive(work.student[j])
+        work.norm[j] = 1.0
+        work.student[j] = 1.0
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def start_beam_terms(work):
+    for j in range(work.norm.shape[0]):
+        work.norm[j] = 1.0
+        work.student[j] = 1.0
+        work.chi[j] = 0.0
+        work.logs[j] = 0.0
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def finish_loglik(work, mapaware, student, half_nu1, dist, with_dist, inv_d2, out):
+    """Every particle's log-likelihood into ``out`` from its beam terms, with its distance
+    innovations (``dist`` (2, M), if ``with_dist``); returns the smallest sum of d^2 / v."""
+    half = half_nu1 if student else 0.0
+    chi, logs, norm, prod = work.chi, work.logs, work.norm, work.student
+    dist_e, dist_n = dist[0], dist[1]
+    for j in range(out.shape[0]):
+        ll = -0.5 * chi[j] if not student else 0.0
+        if mapaware:
+            ll += logs[j] - 0.5 * log_positive(norm[j]) - half * log_positive(prod[j])
+        if with_dist:
+            ll -= 0.5 * (dist_e[j] * dist_e[j] + dist_n[j] * dist_n[j]) * inv_d2
         out[j] = ll
+    best = np.inf
+    for j in range(out.shape[0]):
+        best = min(best, work.chi[j])
     return best
 
 
-def loglik_loose_numpy(x, offsets, up, z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma):
-    """Plain-numpy reference of :func:`loglik_loose`: returns (loglik (M,), best chi^2 per beam)."""
-    ok = ~np.isnan(offsets[:, 2])
-    o = offsets[ok]
-    h = bilinear_numpy(z, e0, n0, inv_re, inv_rn, x[:, 0:1] + o[:, 0], x[:, 1:2] + o[:, 1])
-    sq = np.where(np.isnan(h), (outside_sigma * sig_u) ** 2, (up + o[:, 2] - h) ** 2).sum(axis=1)
-    chi = sq / sig_u**2
-    best = (chi / ok.sum()).min() if ok.any() else np.inf
-    return -0.5 * chi, best
-
-
-# --------------------------------------------------------------------------------------
-# Map-aware, robust likelihoods (docs/model.md, Section 6.3)
-#
-# Each beam's variance is the sonar's plus the navigation map's variance at the beam's
-# footprint (``terrain/representation.py``: slope x resolution plus the declared map
-# error), interpolated like the map. Because that variance depends on where a particle
-# puts the footprint, its log-normaliser stays in the log-likelihood:
-#
-#   Gaussian:  log p = -1/2 [ d^2 / v + log(v / sigma_U^2) ]
-#   Student-t: log p = -(nu + 1)/2 log(1 + d^2 / (nu v)) - 1/2 log(v / sigma_U^2)
-#
-# (constants dropped; with a zero variance grid the Gaussian reduces to the plain kernels
-# above). The Student-t's heavy tails bound the pull of one wild range (outliers,
-# multipath, fish). A footprint off the map is charged ``outside_sigma`` of its sigma.
-# The divergence statistic is the mean d^2 / v per beam of the best particle.
-# --------------------------------------------------------------------------------------
-LIK_GAUSSIAN, LIK_STUDENT = LIKELIHOOD["gaussian"], LIKELIHOOD["student-t"]
-
-
-# The jitted kernels sum the beams' log-densities as logs of products: one log per particle
-# for the normalisers and one for the Student-t terms, instead of one or two per beam (the
-# logs were most of the likelihood's cost). Each factor is >= 1; a product past
-# PRODUCT_LOG_AT is moved into the log sum, so nothing overflows whatever the beam count.
-PRODUCT_LOG_AT = 1e150
+@nb.njit(cache=True)
+def _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i):
+    """The map rows and terms of beam ``i`` (its footprints in ``work``); folds the products
+    every FOLD_BEAMS beams."""
+    gather_cells(work.cell, grid.nodes, grid.grids, grid.nx, work.stage)
+    add_beam_terms(work.stage, grid.grids, work.cell, work.tx, work.ty, work.pu, su2, out2, lik.mapaware, inv_nu, work)
+    if lik.mapaware and (i + 1) % FOLD_BEAMS == 0 and i + 1 < used:
+        fold_beam_terms(work, half_nu1)
 
 
 @nb.njit(cache=True, inline="always")
-def _beam_terms_add(acc, q, v, inv_u2, kind, nu):
-    """Add one beam (normalised squared innovation ``q`` = d^2 / v, variance ``v``) to the
-    density accumulator ``acc`` = (log sum, normaliser product, Student-t product, Gaussian
-    quadratic sum). The caller divides once and adds the same ``q`` to its chi^2."""
-    logs, norm, student, quad = acc
-    norm *= v * inv_u2
-    if kind == LIK_STUDENT:
-        student *= 1.0 + q * (1.0 / nu)
-    else:
-        quad += -0.5 * q
-    if norm > PRODUCT_LOG_AT:
-        logs += -0.5 * math.log(norm)
-        norm = 1.0
-    if student > PRODUCT_LOG_AT:
-        logs += -0.5 * (nu + 1.0) * math.log(student)
-        student = 1.0
-    return logs, norm, student, quad
+def _density_constants(lik):
+    student = lik.kind == LIK_STUDENT
+    return (1.0 / lik.nu if student else 0.0), (0.5 * (lik.nu + 1.0) if student else 0.0), student
 
 
-@nb.njit(cache=True, inline="always")
-def _beam_terms_total(acc, kind, nu):
-    """The sum of the beams' log-densities (constants dropped) from the accumulator."""
-    logs, norm, student, quad = acc
-    total = logs - 0.5 * math.log(norm) + quad
-    if kind == LIK_STUDENT:
-        total += -0.5 * (nu + 1.0) * math.log(student)
-    return total
+@nb.njit(cache=True)
+def loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist, with_dist, inv_d2, work, out):
+    """The log-likelihoods of particles ``lo .. lo + n - 1`` of the beams ``vec``
+    (``beam_vectors``) into ``out`` (n,), with the block's work arrays ``work``
+    (:func:`work_block`) and distance innovations ``dist`` (2, n); ``att`` the attitude reference
+    of the trigonometry (``trig.attitude_reference``; it does not change the result). Returns
+    the best (smallest) mean d^2 / v per beam."""
+    inv_nu, half_nu1, student = _density_constants(lik)
+    used = vec.shape[0]
+    attitude_matrices(x, lo, att, work.dcm)
+    start_beam_terms(work)
+    for i in range(used):
+        tight_footprints(x, lo, work.dcm, vec[i, 0], vec[i, 1], vec[i, 2], grid, work.cell, work.tx, work.ty,
+                         work.pu)
+        _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i)
+    best = finish_loglik(work, lik.mapaware, student, half_nu1, dist, with_dist, inv_d2, out)
+    return best / used if used > 0 else np.inf
 
 
-def _beam_logpdf_numpy(d2, v, sig_u, kind, nu):
+@nb.njit(cache=True)
+def loglik_loose_pass(x, lo, rows, up, grid, lik, su2, out2, work, out):
+    """:func:`loglik_tight_pass` for the loose filter (``x`` (2, M)): ``rows`` the used beam
+    offsets in the navigation frame (``used_offsets``), from the navigation height ``up``."""
+    inv_nu, half_nu1, student = _density_constants(lik)
+    used = rows.shape[0]
+    start_beam_terms(work)
+    for i in range(used):
+        loose_footprints(x, lo, rows[i, 0], rows[i, 1], up + rows[i, 2], grid, work.cell, work.tx, work.ty, work.pu)
+        _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i)
+    best = finish_loglik(work, lik.mapaware, student, half_nu1, work.dcm, False, 0.0, out)
+    return best / used if used > 0 else np.inf
+
+
+@nb.njit(cache=True)
+def loglik_tight(x, beams, ranges, grid, lik, sig_u, outside_sigma, dist_innov, sig_d, with_dist, ref_pitch,
+                 ref_roll, ref_yaw, out):
+    """Fill ``out`` (M,) with each particle's log-likelihood (``x`` (8, M)); return the best chi^2
+    per beam. ``grid`` is the map's :class:`~tanbench.terrain.grid.NodeGrid` (with the
+    variance grid interleaved for the map-aware density), ``lik`` a
+    :class:`~tanbench.filters.params.Likelihood`; ``dist_innov`` (2, M) enters if
+    ``with_dist``. ``ref_*`` (the navigation attitude) only centre the trigonometry."""
+    su2, inv_d2, out2 = beam_constants(sig_u, sig_d, outside_sigma)
+    m = x.shape[1]
+    work = work_block(new_likelihood_work(m, 4 * grid.grids), m)
+    return loglik_tight_pass(x, 0, beam_vectors(beams, ranges), grid, lik, su2, out2,
+                             attitude_reference(ref_pitch, ref_roll, ref_yaw), dist_innov, with_dist, inv_d2, work, out)
+
+
+@nb.njit(cache=True)
+def loglik_loose(x, offsets, up, grid, lik, sig_u, outside_sigma, out):
+    """Loose filter (``x`` (2, M)): beams projected once with the navigation attitude, ``offsets``
+    (m, 3) in m; rows with NaN are beams without a range and are skipped."""
+    su2, _, out2 = beam_constants(sig_u, 1.0, outside_sigma)
+    m = x.shape[1]
+    work = work_block(new_likelihood_work(m, 4 * grid.grids), m)
+    return loglik_loose_pass(x, 0, used_offsets(offsets), up, grid, lik, su2, out2, work, out)
+
+
+# ---- plain-numpy references --------------------------------------------------------------------
+def _beam_logpdf_numpy(d2, v, sig_u, mapaware, kind, nu):
+    if not mapaware:
+        return -0.5 * d2 / sig_u**2
     norm = -0.5 * np.log(v / sig_u**2)
     if kind == LIK_STUDENT:
         return -0.5 * (nu + 1.0) * np.log1p(d2 / (nu * v)) + norm
     return -0.5 * d2 / v + norm
 
 
-@nb.njit(cache=True, inline="always")
-def loglik_tight_mapaware_particle(x, j, vec, zv, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, att,
-                                   kind, nu, dist_e, dist_n, inv_d2):
-    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_tight_mapaware`;
-    ``zv``: the map and its variance grid interleaved (``grid.stack_grids``)."""
-    dcm = _particle_dcm(x, j, att)
-    acc = (0.0, 1.0, 1.0, 0.0)
-    chi = 0.0
-    for i in range(vec.shape[0]):
-        pe, pn, pu = _footprint(x, j, dcm, vec, i)
-        h, mv = bilinear_pair(zv, e0, n0, inv_re, inv_rn, pe, pn)
-        if h == h and mv == mv:
-            v = su2 + mv
-            q = (pu - h) * (pu - h) / v
-            acc = _beam_terms_add(acc, q, v, inv_u2, kind, nu)
-            chi += q
-        else:
-            acc = _beam_terms_add(acc, out2, su2, inv_u2, kind, nu)
-            chi += out2
-    return _beam_terms_total(acc, kind, nu) - 0.5 * (dist_e ** 2 + dist_n ** 2) * inv_d2, chi
-
-
-@nb.njit(cache=True)
-def loglik_tight_mapaware(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                          dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out):
-    """:func:`loglik_tight` with per-beam variance ``sig_u^2 + mvar`` at the footprint and a
-    Gaussian or Student-t beam density; returns the best mean d^2 / v per beam.
-
-    ``mvar`` has the shape and nodes of ``z``; the grids are interleaved first
-    (:func:`loglik_tight_mapaware_stacked` takes them so, as the filter loop does once per run).
-    """
-    return loglik_tight_mapaware_stacked(x, beams, ranges, stack_grids(z, mvar), e0, n0, inv_re, inv_rn, sig_u,
-                                         outside_sigma, dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out)
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
-def loglik_tight_mapaware_stacked(x, beams, ranges, zv, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                                  dist_innov, sig_d, ref_pitch, ref_roll, ref_yaw, kind, nu, out):
-    """:func:`loglik_tight_mapaware` on the interleaved map and variance grid ``zv``."""
-    vec = beam_vectors(beams, ranges)
-    used = vec.shape[0]
-    su2, inv_u2, inv_d2, _, out2 = beam_constants(sig_u, sig_d, outside_sigma)
-    att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
-    best = np.inf
-    for j in range(x.shape[0]):
-        ll, chi = loglik_tight_mapaware_particle(x, j, vec, zv, e0, n0, inv_re, inv_rn, su2, inv_u2,
-                                                 out2, att, kind, nu, dist_innov[j, 0], dist_innov[j, 1], inv_d2)
-        if used > 0 and chi / used < best:
-            best = chi / used
-        out[j] = ll
-    return best
-
-
-def loglik_tight_mapaware_numpy(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                                dist_innov, sig_d, kind, nu):
-    """Plain-numpy reference of :func:`loglik_tight_mapaware`: (loglik (M,), best)."""
-    c = dcm_body_to_nav_numpy(x[:, PITCH], x[:, ROLL], x[:, YAW])
-    ok = ~np.isnan(ranges)
-    vec = beams[ok] * ranges[ok][:, None]
-    p = x[:, None, [E, N, U]] + np.einsum("mij,bj->mbi", c, vec)
-    return _mapaware_terms(p[..., 0], p[..., 1], p[..., 2], z, mvar, e0, n0, inv_re, inv_rn, sig_u,
-                           outside_sigma, kind, nu, ok.sum(), (dist_innov**2).sum(axis=1) / sig_d**2)
-
-
-def _mapaware_terms(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, used, dist_chi):
+def _terms_numpy(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, mapaware, kind, nu, used,
+                 dist_chi):
     h = bilinear_numpy(z, e0, n0, inv_re, inv_rn, pe, pn)
-    mv = bilinear_numpy(mvar, e0, n0, inv_re, inv_rn, pe, pn)
+    mv = bilinear_numpy(mvar, e0, n0, inv_re, inv_rn, pe, pn) if mapaware else np.zeros_like(h)
     off = np.isnan(h) | np.isnan(mv)
     v = np.where(off, sig_u**2, sig_u**2 + np.nan_to_num(mv))
     d2 = np.where(off, outside_sigma**2 * sig_u**2, (pu - np.nan_to_num(h)) ** 2)
-    ll = _beam_logpdf_numpy(d2, v, sig_u, kind, nu).sum(axis=1)
+    ll = _beam_logpdf_numpy(d2, v, sig_u, mapaware, kind, nu).sum(axis=1)
     chi = (d2 / v).sum(axis=1)
     best = (chi / used).min() if used else np.inf
     return ll - 0.5 * dist_chi, best
 
 
-@nb.njit(cache=True, inline="always")
-def loglik_loose_mapaware_particle(x, j, offsets, up, zv, e0, n0, inv_re, inv_rn, su2, inv_u2, out2, kind, nu):
-    """(log-likelihood, sum of d^2 / v) of particle ``j`` for :func:`loglik_loose_mapaware`
-    (``zv`` as in :func:`loglik_tight_mapaware_particle`)."""
-    acc = (0.0, 1.0, 1.0, 0.0)
-    chi = 0.0
-    for i in range(offsets.shape[0]):
-        pe = x[j, 0] + offsets[i, 0]
-        pn = x[j, 1] + offsets[i, 1]
-        h, mv = bilinear_pair(zv, e0, n0, inv_re, inv_rn, pe, pn)
-        if h == h and mv == mv:
-            v = su2 + mv
-            d = up + offsets[i, 2] - h
-            q = d * d / v
-            acc = _beam_terms_add(acc, q, v, inv_u2, kind, nu)
-            chi += q
-        else:
-            acc = _beam_terms_add(acc, out2, su2, inv_u2, kind, nu)
-            chi += out2
-    return _beam_terms_total(acc, kind, nu), chi
+def loglik_tight_numpy(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, dist_innov, sig_d,
+                       mapaware=False, kind=LIK_GAUSSIAN, nu=4.0):
+    """Plain-numpy reference of :func:`loglik_tight` (``mvar``: the variance grid, used if
+    ``mapaware``; ``dist_innov`` (2, M) or None): (loglik (M,), best chi^2 per beam)."""
+    c = dcm_body_to_nav_numpy(x[PITCH], x[ROLL], x[YAW])  # (M, 3, 3)
+    ok = ~np.isnan(ranges)
+    vec = beams[ok] * ranges[ok][:, None]  # (m', 3)
+    p = x[[E, N, U]].T[:, None, :] + np.einsum("mij,bj->mbi", c, vec)  # (M, m', 3)
+    dist_chi = 0.0 if dist_innov is None else (dist_innov**2).sum(axis=0) / sig_d**2
+    return _terms_numpy(p[..., 0], p[..., 1], p[..., 2], z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
+                        mapaware, kind, nu, ok.sum(), dist_chi)
 
 
-@nb.njit(cache=True)
-def loglik_loose_mapaware(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, out):
-    """:func:`loglik_loose` with the map-aware variance and a Gaussian or Student-t beam density
-    (``mvar`` on the nodes of ``z``; interleaved first, as in :func:`loglik_tight_mapaware`)."""
-    return loglik_loose_mapaware_stacked(x, offsets, up, stack_grids(z, mvar), e0, n0, inv_re, inv_rn, sig_u,
-                                         outside_sigma, kind, nu, out)
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
-def loglik_loose_mapaware_stacked(x, offsets, up, zv, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu, out):
-    """:func:`loglik_loose_mapaware` on the interleaved map and variance grid ``zv``."""
-    rows = used_offsets(offsets)
-    used = rows.shape[0]
-    su2, inv_u2, _, _, out2 = beam_constants(sig_u, 1.0, outside_sigma)
-    best = np.inf
-    for j in range(x.shape[0]):
-        ll, chi = loglik_loose_mapaware_particle(x, j, rows, up, zv, e0, n0, inv_re, inv_rn, su2, inv_u2,
-                                                 out2, kind, nu)
-        if used > 0 and chi / used < best:
-            best = chi / used
-        out[j] = ll
-    return best
-
-
-def loglik_loose_mapaware_numpy(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu):
-    """Plain-numpy reference of :func:`loglik_loose_mapaware`: (loglik (M,), best)."""
+def loglik_loose_numpy(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, mapaware=False,
+                       kind=LIK_GAUSSIAN, nu=4.0):
+    """Plain-numpy reference of :func:`loglik_loose`: (loglik (M,), best chi^2 per beam)."""
     ok = ~np.isnan(offsets[:, 2])
     o = offsets[ok]
-    pe = x[:, 0:1] + o[:, 0]
-    pn = x[:, 1:2] + o[:, 1]
+    pe = x[0][:, None] + o[:, 0]
+    pn = x[1][:, None] + o[:, 1]
     pu = np.broadcast_to(up + o[:, 2], pe.shape)
-    return _mapaware_terms(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, kind, nu,
-                           ok.sum(), np.zeros(x.shape[0]))
+    return _terms_numpy(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, mapaware, kind, nu,
+                        ok.sum(), 0.0)

@@ -24,74 +24,56 @@ import math
 import numba as nb
 import numpy as np
 
-from tanbench.filters import FASTMATH
-from tanbench.filters.cloud import gaussian_horizontal
+from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (beam_constants, loglik_loose_mapaware_particle, loglik_loose_particle,
-                                        used_offsets)
-from tanbench.filters.propagate import DIST_NONE, propagate_loose_particle, propagate_tight
+from tanbench.filters.likelihood import (BLOCK, beam_constants, loglik_loose_pass, new_likelihood_work, used_offsets,
+                                        work_block)
+from tanbench.filters.propagate import DIST_NONE, propagate_loose, propagate_tight
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
+from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
 from tanbench.filters.params import Likelihood
 from tanbench.filters.tight import keep_on_map
 from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
 from tanbench.navigation.increments import JAZE, JAZN, SZ
 
-LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states the regularisation jitters
+LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states (rows) the regularisation jitters
 
 
 @nb.njit(cache=True)
-def init_loose(x, rng, centre_e, centre_n, half_side):
-    """Uniform square of side 2 * half_side around the centre."""
-    for j in range(x.shape[0]):
-        x[j, 0] = centre_e + rng.uniform(-half_side, half_side)
-        x[j, 1] = centre_n + rng.uniform(-half_side, half_side)
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
-def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading, offsets, up, zmap, sig_u,
-                              outside_sigma, lik, ll):
-    """One pass over the particles of a loose update: for each particle, draw its three
-    normals (east, north, cross-track: the order of filling an (M, 3) array row by row),
-    move it by (``d_e``, ``d_n``) if ``propagate`` (``propagate_loose``) and weigh it
-    (``loglik_loose``, or ``loglik_loose_mapaware`` if ``lik.mapaware``, into ``ll``).
-    Returns the best chi^2 per beam. As ``tight.propagate_and_weigh``, the arithmetic is
-    the array kernels' own.
-    """
-    z, e0, n0, inv_re, inv_rn = zmap
-    su2, inv_u2, _, outside_sq, out2 = beam_constants(sig_u, 1.0, outside_sigma)
+def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading, offsets, up, grid, su2, out2, lik,
+                              noise_buf, work, ll):
+    """One loose update's particle passes, block by block (``work``'s size): draw the three
+    noise rows (east, north, cross-track), move the particles by (``d_e``, ``d_n``) if
+    ``propagate`` (:func:`~tanbench.filters.propagate.propagate_loose`) and weigh them into
+    ``ll`` (:func:`~tanbench.filters.likelihood.loglik_loose_pass`). Returns the best chi^2 per beam."""
     rows = used_offsets(offsets)
-    used = rows.shape[0]
+    m = x.shape[1]
+    block = work.norm.shape[0]
     best = np.inf
-    for j in range(x.shape[0]):
+    for lo in range(0, m, block):
+        n = min(block, m - lo)
         if propagate:
-            n_e = rng.standard_normal()
-            n_n = rng.standard_normal()
-            n_heading = rng.standard_normal()
-            propagate_loose_particle(x, j, d_e, d_n, n_e, n_n, n_heading, sig_pos, sig_heading)
-        if lik.mapaware:
-            lj, chi = loglik_loose_mapaware_particle(x, j, rows, up, lik.grids, e0, n0, inv_re, inv_rn, su2,
-                                                     inv_u2, out2, lik.kind, lik.nu)
-        else:
-            lj, chi = loglik_loose_particle(x, j, rows, up, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq)
-        if used > 0 and chi / used < best:
-            best = chi / used
-        ll[j] = lj
+            noise = noise_buf[:3 * n].reshape((3, n))
+            fill_normals(rng, noise)
+            propagate_loose(x, d_e, d_n, noise, sig_pos, sig_heading, lo)
+        best = min(best, loglik_loose_pass(x, lo, rows, up, grid, lik, su2, out2, work_block(work, n), ll[lo:lo + n]))
     return best
 
 
 @nb.njit(cache=True)
-def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div, half_side, readings,
+def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, grid, model, rs, div, half_side, readings,
                       out_en, var, cov_en_out, ess_out, reinit_out, fixed_out):
     """Run the loose filter; ``out_en`` (K+1, 2) is the fix-corrected navigation position.
 
     ``var`` (K+1, 2) and ``cov_en_out`` (K+1,) are the cloud's east/north (co)variances.
 
-    ``zmap``, ``model``, ``rs``, ``div`` and ``readings`` are the bundles of
-    :mod:`tanbench.filters.params` (MapArgs, LooseModel, Resampling, Divergence, Readings;
+    ``x`` (2, M) is the initial cloud, a column per particle; ``grid`` the navigation map's
+    :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div`` and ``readings`` are the bundles of
+    :mod:`tanbench.filters.params` (LooseModel, Resampling, Divergence, Readings;
     of the readings the loose filter uses ``cloud_std``, ``div_reinit`` and ``collapse_spread``).
     """
-    m = x.shape[0]
+    m = x.shape[1]
     steps = offsets.shape[0]
     logw = np.zeros(m)
     ll = np.empty(m)
@@ -107,12 +89,15 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
     bad = 0
     good = 0
     consistent_chi = (0.5 * div.sigma) ** 2
-    plain = Likelihood(False, 0, 0.0, np.zeros((2, 2, 2)))  # the fix-only loop weighs with loglik_loose
+    plain = Likelihood(False, 0, 4.0)  # the fix-only loop weighs with the plain Gaussian
+    noise = np.empty(3 * min(BLOCK, m))
+    work = new_likelihood_work(min(BLOCK, m), 4 * grid.grids)
+    su2, _, out2 = beam_constants(model.sig_u, 1.0, model.outside_sigma)
     for k in range(steps):
         d_e = d0[k - 1, 0] if k > 0 else 0.0
         d_n = d0[k - 1, 1] if k > 0 else 0.0
         best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, model.sig_pos, model.sig_heading, offsets[k],
-                                         nav_up[k], zmap, model.sig_u, model.outside_sigma, plain, ll)
+                                         nav_up[k], grid, su2, out2, plain, noise, work, ll)
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, -1, 0.0, mean, v, cov)
@@ -137,7 +122,7 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, zmap, model, rs, div,
         if diverged or collapsed:
             centre_e = out_en[k, 0] if diverged else mean[0]
             centre_n = out_en[k, 1] if diverged else mean[1]
-            init_loose(x, rng, centre_e, centre_n, half_side)
+            uniform_horizontal(x, rng, centre_e, centre_n, half_side)
             if readings.cloud_std > 0.0:
                 gaussian_horizontal(x, rng, centre_e, centre_n, readings.cloud_std)
             logw[:] = 0.0
@@ -190,7 +175,7 @@ def _open_window(m_prior, p_prior, centre_e, centre_n, half_side):
 # Closed-loop loose TAN ("kalman-feedback", the recommended architecture)
 # --------------------------------------------------------------------------------------
 @nb.njit(cache=True)
-def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, div, half_side, lik, guard,
+def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, grid, model, rs, div, half_side, lik, guard,
                       kf, p_kf, out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out,
                       rejected_out, healthy_out):
     """Position PF -> fixes -> error-state KF of the navigation system -> corrected navigation,
@@ -206,14 +191,15 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     accepted fix is injected into the corrected navigation. ``p_kf`` (4, 4) is the KF's
     initial covariance, updated in place; ``out_en[0]`` holds the start position.
 
-    ``zmap``, ``model``, ``rs``, ``div``, ``lik``, ``guard`` and ``kf`` are the bundles of
-    :mod:`tanbench.filters.params` (MapArgs, LooseModel, Resampling, Divergence,
+    ``x`` (2, M) is the initial cloud; ``grid`` the navigation map's
+    :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div``, ``lik``, ``guard`` and ``kf`` are the
+    bundles of :mod:`tanbench.filters.params` (LooseModel, Resampling, Divergence,
     Likelihood, Guard, LooseKalman); ``model.sig_heading`` is not used (the KF's heading
     std replaces it).
     """
     sig_pos = model.sig_pos
     converged_std = model.converged_std
-    m = x.shape[0]
+    m = x.shape[1]
     steps = offsets.shape[0]
     nb_beams = offsets.shape[1]
     logw = np.zeros(m)
@@ -232,12 +218,15 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     p_prior = np.empty((2, 2))
     zt = np.empty(2)
     _open_window(m_prior, p_prior, out_en[0, 0], out_en[0, 1], half_side)
-    nav = np.zeros((1, N_TIGHT))
-    zero_noise = np.zeros((1, 6))
-    dist = np.zeros((1, 2))
-    nav[0, E] = out_en[0, 0]
-    nav[0, N] = out_en[0, 1]
-    nav[0, YAW] = nav_yaw[0]
+    nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
+    zero_noise = np.zeros((6, 1))
+    dist = np.zeros((2, 1))
+    noise = np.empty(3 * min(BLOCK, m))
+    work = new_likelihood_work(min(BLOCK, m), 4 * grid.grids)
+    su2, _, out2 = beam_constants(model.sig_u, 1.0, model.outside_sigma)
+    nav[E, 0] = out_en[0, 0]
+    nav[N, 0] = out_en[0, 1]
+    nav[YAW, 0] = nav_yaw[0]
     bad = 0
     good = 0
     since_fix = 0
@@ -252,15 +241,15 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
     sig_heading = 0.0
     for k in range(steps):
         if k > 0:
-            e_before = nav[0, E]
-            n_before = nav[0, N]
-            s, c = math.sin(nav[0, YAW] - nav_yaw[k - 1]), math.cos(nav[0, YAW] - nav_yaw[k - 1])
+            e_before = nav[E, 0]
+            n_before = nav[N, 0]
+            s, c = math.sin(nav[YAW, 0] - nav_yaw[k - 1]), math.cos(nav[YAW, 0] - nav_yaw[k - 1])
             b_e = -(c * inc[k - 1, JAZE] - s * inc[k - 1, JAZN])
             b_n = -(s * inc[k - 1, JAZE] + c * inc[k - 1, JAZN])
-            nav[0, U] = nav_up[k - 1]
+            nav[U, 0] = nav_up[k - 1]
             propagate_tight(nav, inc[k - 1], nav_yaw[k - 1], zero_noise, 0.0, 0.0, 0.0, DIST_NONE, dist)
-            d_e = nav[0, E] - e_before
-            d_n = nav[0, N] - n_before
+            d_e = nav[E, 0] - e_before
+            d_n = nav[N, 0] - n_before
             sig_heading = math.sqrt(p_kf[EPSI, EPSI])
             eskf_predict(p_kf, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
             # the window's prior: the same motion and process noise as the particles
@@ -272,14 +261,14 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
             p_prior[0, 1] -= sh2 * d_e * d_n
             p_prior[1, 0] -= sh2 * d_e * d_n
         # beams turned by the corrected heading's offset from the navigation heading
-        s, c = math.sin(nav[0, YAW] - nav_yaw[k]), math.cos(nav[0, YAW] - nav_yaw[k])
+        s, c = math.sin(nav[YAW, 0] - nav_yaw[k]), math.cos(nav[YAW, 0] - nav_yaw[k])
         for i in range(nb_beams):
             rot[i, 0] = c * offsets[k, i, 0] - s * offsets[k, i, 1]
             rot[i, 1] = s * offsets[k, i, 0] + c * offsets[k, i, 1]
             rot[i, 2] = offsets[k, i, 2]
-        # the particles move (k > 0) and are weighed in one pass
-        best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, sig_pos, sig_heading, rot, nav_up[k], zmap,
-                                         model.sig_u, model.outside_sigma, lik, ll)
+        # the particles move (k > 0) and are weighed
+        best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, sig_pos, sig_heading, rot, nav_up[k], grid,
+                                         su2, out2, lik, noise, work, ll)
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, -1, 0.0, mean, v, cov)
@@ -297,23 +286,23 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
                 r[1, 1] += kf.r_floor * kf.r_floor
                 if first_fix:  # position reset: one fix cannot tell an initial position error from heading
                     position_reset(p_kf, r)
-                    nav[0, E] = zt[0]
-                    nav[0, N] = zt[1]
+                    nav[E, 0] = zt[0]
+                    nav[N, 0] = zt[1]
                     first_fix = False
                     fixed_out[k] = 1
                 else:
-                    chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
+                    chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
                     if not chi2 < kf.gate:
                         rejections += 1
                         if rejections >= kf.misses:  # the KF is locked out: reopen it and take the fix
                             reopen_kf(p_kf, p0_pos, p0_yaw)
-                            chi2 = eskf_update(p_kf, zt[0] - nav[0, E], zt[1] - nav[0, N], r, kf.gate, dx)
+                            chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
                     if chi2 < kf.gate:
                         rejections = 0
-                        nav[0, E] += dx[EE]
-                        nav[0, N] += dx[EN]
-                        nav[0, YAW] += dx[EPSI]
-                        nav[0, BZ] += dx[EB]
+                        nav[E, 0] += dx[EE]
+                        nav[N, 0] += dx[EN]
+                        nav[YAW, 0] += dx[EPSI]
+                        nav[BZ, 0] += dx[EB]
                         fixed_out[k] = 1
                     else:
                         rejected_out[k] = 1
@@ -322,11 +311,11 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
             for a in range(2):
                 for b in range(2):
                     p_prior[a, b] = cov[a, b]
-        off_map = keep_on_map(nav[0, :2], guard.bounds)
-        out_en[k, 0] = nav[0, E]
-        out_en[k, 1] = nav[0, N]
-        out_yaw[k] = nav[0, YAW]
-        out_bias[k] = nav[0, BZ]
+        off_map = keep_on_map(nav[:2, 0], guard.bounds)
+        out_en[k, 0] = nav[E, 0]
+        out_en[k, 1] = nav[N, 0]
+        out_yaw[k] = nav[YAW, 0]
+        out_bias[k] = nav[BZ, 0]
         var[k, 0] = p_kf[EE, EE]
         var[k, 1] = p_kf[EN, EN]
         var_yaw[k] = p_kf[EPSI, EPSI]
@@ -336,13 +325,13 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, model, rs, di
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
             bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
         if bad >= div.steps or off_map:
-            init_loose(x, rng, nav[0, E], nav[0, N], half_side)
+            uniform_horizontal(x, rng, nav[E, 0], nav[N, 0], half_side)
             logw[:] = 0.0
             bad = 0
             good = 0
             locked = False
             first_fix = True
-            _open_window(m_prior, p_prior, nav[0, E], nav[0, N], half_side)
+            _open_window(m_prior, p_prior, nav[E, 0], nav[N, 0], half_side)
             reinit_out[k] = 1
             continue
         resample_and_regularise(x, w, logw, ess, rng, rs, 2, spread, uni, idx, scratch)

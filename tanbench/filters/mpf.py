@@ -37,8 +37,10 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.filters.cloud import uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
+from tanbench.filters.rng import fill_normals
 from tanbench.filters.trig import sin_cos
 from tanbench.navigation.increments import D0E, D0N, DYAW, JAZE, JAZN, SZ
 from tanbench.terrain.grid import bilinear, bilinear_numpy
@@ -50,41 +52,42 @@ REG_COLS = np.array([E, N, PSI], dtype=np.int64)
 
 @nb.njit(cache=True)
 def mpf_propagate(x, inc, yaw_nav0, noise, sig_pos, q_psi, q_eps, q_b):
-    """Move particles and their Kalman filters over one interval; ``noise`` (M, 3) standard normals."""
-    for j in range(x.shape[0]):
-        s, c = sin_cos(x[j, PSI] - yaw_nav0)
-        eps = x[j, EPS]
+    """Move particles (``x`` (7, M), a column per particle) and their Kalman filters over one
+    interval; ``noise`` (3, M) standard normals."""
+    for j in range(x.shape[1]):
+        s, c = sin_cos(x[PSI, j] - yaw_nav0)
+        eps = x[EPS, j]
         ue = inc[D0E] - eps * inc[JAZE]
         un = inc[D0N] - eps * inc[JAZN]
-        x[j, E] += c * ue - s * un + sig_pos * noise[j, 0]
-        x[j, N] += s * ue + c * un + sig_pos * noise[j, 1]
+        x[E, j] += c * ue - s * un + sig_pos * noise[0, j]
+        x[N, j] += s * ue + c * un + sig_pos * noise[1, j]
         # yaw from its marginal, then that transition updates the bias KF
         sz = inc[SZ]
-        s_var = sz * sz * x[j, PEPS] + q_psi
-        step = inc[DYAW] - sz * eps + math.sqrt(s_var) * noise[j, 2]
-        x[j, PSI] += step
+        s_var = sz * sz * x[PEPS, j] + q_psi
+        step = inc[DYAW] - sz * eps + math.sqrt(s_var) * noise[2, j]
+        x[PSI, j] += step
         innov = step - (inc[DYAW] - sz * eps)
-        gain = -sz * x[j, PEPS] / s_var
-        x[j, EPS] = eps + gain * innov
-        x[j, PEPS] = x[j, PEPS] * q_psi / s_var + q_eps
-        x[j, PB] += q_b
+        gain = -sz * x[PEPS, j] / s_var
+        x[EPS, j] = eps + gain * innov
+        x[PEPS, j] = x[PEPS, j] * q_psi / s_var + q_eps
+        x[PB, j] += q_b
 
 
 def mpf_propagate_numpy(x, inc, yaw_nav0, noise, sig_pos, q_psi, q_eps, q_b):
     """Plain-numpy reference of :func:`mpf_propagate` (returns a new array)."""
     x = x.copy()
-    d = x[:, PSI] - yaw_nav0
-    eps = x[:, EPS].copy()
-    u = np.stack([inc[D0E] - eps * inc[JAZE], inc[D0N] - eps * inc[JAZN]], 1)
-    x[:, E] += np.cos(d) * u[:, 0] - np.sin(d) * u[:, 1] + sig_pos * noise[:, 0]
-    x[:, N] += np.sin(d) * u[:, 0] + np.cos(d) * u[:, 1] + sig_pos * noise[:, 1]
-    s_var = inc[SZ] ** 2 * x[:, PEPS] + q_psi
+    d = x[PSI] - yaw_nav0
+    eps = x[EPS].copy()
+    u = np.stack([inc[D0E] - eps * inc[JAZE], inc[D0N] - eps * inc[JAZN]])
+    x[E] += np.cos(d) * u[0] - np.sin(d) * u[1] + sig_pos * noise[0]
+    x[N] += np.sin(d) * u[0] + np.cos(d) * u[1] + sig_pos * noise[1]
+    s_var = inc[SZ] ** 2 * x[PEPS] + q_psi
     pred = inc[DYAW] - inc[SZ] * eps
-    step = pred + np.sqrt(s_var) * noise[:, 2]
-    x[:, PSI] += step
-    x[:, EPS] = eps - inc[SZ] * x[:, PEPS] / s_var * (step - pred)
-    x[:, PEPS] = x[:, PEPS] * q_psi / s_var + q_eps
-    x[:, PB] += q_b
+    step = pred + np.sqrt(s_var) * noise[2]
+    x[PSI] += step
+    x[EPS] = eps - inc[SZ] * x[PEPS] / s_var * (step - pred)
+    x[PEPS] = x[PEPS] * q_psi / s_var + q_eps
+    x[PB] += q_b
     return x
 
 
@@ -97,10 +100,10 @@ def mpf_loglik_update(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn, sig_
     r2 = sig_u * sig_u
     outside_sq = outside_sigma * outside_sigma
     best = np.inf
-    for j in range(x.shape[0]):
-        s, c = sin_cos(x[j, PSI] - yaw_nav)
-        bhat = x[j, B]
-        pb = x[j, PB]
+    for j in range(x.shape[1]):
+        s, c = sin_cos(x[PSI, j] - yaw_nav)
+        bhat = x[B, j]
+        pb = x[PB, j]
         used = 0
         outside = 0
         sy = 0.0
@@ -110,7 +113,7 @@ def mpf_loglik_update(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn, sig_
                 continue
             oe = offsets_k[i, 0]
             on = offsets_k[i, 1]
-            h = bilinear(z, e0, n0, inv_re, inv_rn, x[j, E] + c * oe - s * on, x[j, N] + s * oe + c * on)
+            h = bilinear(z, e0, n0, inv_re, inv_rn, x[E, j] + c * oe - s * on, x[N, j] + s * oe + c * on)
             if h != h:
                 outside += 1
                 continue
@@ -126,8 +129,8 @@ def mpf_loglik_update(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn, sig_
                 best = chi
         if used > 0:
             p_new = 1.0 / (1.0 / pb + used / r2) if pb > 0 else 0.0
-            x[j, B] = bhat + p_new * sy / r2
-            x[j, PB] = p_new
+            x[B, j] = bhat + p_new * sy / r2
+            x[PB, j] = p_new
     return best
 
 
@@ -137,19 +140,19 @@ def mpf_loglik_update_numpy(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn
     x = x.copy()
     ok = ~np.isnan(offsets_k[:, 2])
     o = offsets_k[ok]
-    d = x[:, PSI] - yaw_nav
+    d = x[PSI] - yaw_nav
     c, s = np.cos(d)[:, None], np.sin(d)[:, None]
-    qe = x[:, E:E + 1] + c * o[:, 0] - s * o[:, 1]
-    qn = x[:, N:N + 1] + s * o[:, 0] + c * o[:, 1]
+    qe = x[E][:, None] + c * o[:, 0] - s * o[:, 1]
+    qn = x[N][:, None] + s * o[:, 0] + c * o[:, 1]
     h = bilinear_numpy(z, e0, n0, inv_re, inv_rn, qe, qn)
-    ll = np.empty(len(x))
+    ll = np.empty(x.shape[1])
     best = np.inf
-    for j in range(len(x)):
+    for j in range(x.shape[1]):
         inside = ~np.isnan(h[j])
         y = up + o[inside, 2] - h[j, inside]
         k = y.size
-        cov = sig_u**2 * np.eye(k) + x[j, PB] * np.ones((k, k))
-        r = y - x[j, B]
+        cov = sig_u**2 * np.eye(k) + x[PB, j] * np.ones((k, k))
+        r = y - x[B, j]
         sign, logdet = np.linalg.slogdet(cov / sig_u**2) if k else (1.0, 0.0)
         outside = (~inside).sum()
         ll[j] = -0.5 * (r @ np.linalg.solve(cov, r) + outside * outside_sigma**2 + logdet) if k else \
@@ -157,22 +160,23 @@ def mpf_loglik_update_numpy(x, offsets_k, up, yaw_nav, z, e0, n0, inv_re, inv_rn
         if k + outside:
             best = min(best, ((r**2).sum() / sig_u**2 + outside * outside_sigma**2) / (k + outside))
         if k:
-            p_new = 1.0 / (1.0 / x[j, PB] + k / sig_u**2)
-            x[j, B] = x[j, B] + p_new * r.sum() / sig_u**2
-            x[j, PB] = p_new
+            p_new = 1.0 / (1.0 / x[PB, j] + k / sig_u**2)
+            x[B, j] = x[B, j] + p_new * r.sum() / sig_u**2
+            x[PB, j] = p_new
     return ll, best, x
 
 
 @nb.njit(cache=True)
 def init_mpf(x, rng, centre_e, centre_n, yaw, half_side, std_yaw, var_b, var_eps):
-    for j in range(x.shape[0]):
-        x[j, E] = centre_e + rng.uniform(-half_side, half_side)
-        x[j, N] = centre_n + rng.uniform(-half_side, half_side)
-        x[j, PSI] = yaw + std_yaw * rng.standard_normal()
-        x[j, B] = 0.0
-        x[j, PB] = var_b
-        x[j, EPS] = 0.0
-        x[j, PEPS] = var_eps
+    """The initial cloud (``x`` (7, M)): uniform square, Gaussian yaw, the KFs at their priors."""
+    uniform_horizontal(x, rng, centre_e, centre_n, half_side)
+    fill_normals(rng, x[PSI])
+    for j in range(x.shape[1]):
+        x[PSI, j] = yaw + std_yaw * x[PSI, j]
+        x[B, j] = 0.0
+        x[PB, j] = var_b
+        x[EPS, j] = 0.0
+        x[PEPS, j] = var_eps
 
 
 @nb.njit(cache=True)
@@ -180,17 +184,18 @@ def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps,
              rs, div, half_side, std_yaw, var_b, var_eps, est, var, ess_out, reinit_out):
     """Run the MPF over K updates; ``est``/``var`` (K, 7): particle means/variances of the columns.
 
-    ``zmap`` is the map's ``MapArgs``, ``rs`` a ``Resampling`` bundle (its ``cols``: E, N, psi),
+    ``x`` (7, M) is the initial cloud, a column per particle; ``zmap`` is the map's ``MapArgs``,
+    ``rs`` a ``Resampling`` bundle (its ``cols``: E, N, psi),
     ``div`` a ``Divergence`` bundle (``tanbench.filters.params``).
     """
     z, e0, n0, inv_re, inv_rn = zmap
     div_sigma, div_steps = div
-    m = x.shape[0]
+    m = x.shape[1]
     steps = offsets.shape[0]
     logw = np.zeros(m)
     ll = np.empty(m)
     w = np.empty(m)
-    noise = np.empty((m, 3))
+    noise = np.empty((3, m))
     uni = np.empty(m)
     idx = np.empty(m, dtype=np.int64)
     scratch = np.empty_like(x)
@@ -200,10 +205,7 @@ def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps,
     bad = 0
     for k in range(steps):
         if k > 0:
-            for j in range(m):
-                noise[j, 0] = rng.standard_normal()
-                noise[j, 1] = rng.standard_normal()
-                noise[j, 2] = rng.standard_normal()
+            fill_normals(rng, noise)
             mpf_propagate(x, inc[k - 1], nav_yaw[k - 1], noise, sig_pos, q_psi, q_eps, q_b)
         best = mpf_loglik_update(x, offsets[k], nav_up[k], nav_yaw[k], z, e0, n0, inv_re, inv_rn, sig_u,
                                  outside_sigma, ll)
@@ -248,7 +250,7 @@ def run_mpf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, inc, beams, ranges, za
     if sig_att_step is None:
         sig_att_step = 2.0 * DEG_PER_SQRT_H * math.sqrt(sampling_time_s)
     q_eps = 2.0 * (gyro_bias_instability_deg_h * DEG_PER_H) ** 2 * sampling_time_s / gyro_bias_corr_time_s
-    x = np.empty((particles, N_MPF))
+    x = np.empty((N_MPF, particles))  # a column per particle
     std_yaw = math.radians(initial_std_heading_deg)
     var_b = initial_std_depth_bias_m**2
     var_eps = (initial_std_gyro_bias_deg_h * DEG_PER_H) ** 2

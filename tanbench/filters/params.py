@@ -2,7 +2,8 @@
 
 The loops take a handful of these instead of dozens of positional numbers; each bundle
 groups the settings of one mechanism, named as in ``FilterSpec``. ``MapArgs`` is the
-navigation map as the kernels read it (``Map.kernel_args()``).
+navigation map as the grid-based estimators read it (``Map.kernel_args()``); the particle
+filters read it as a ``terrain.grid.CellGrid``.
 """
 
 from __future__ import annotations
@@ -36,11 +37,11 @@ LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma c
 # redrawn with its initial spread (0 = never; the Resampling bundle's min_spread re-spreads instead)
 Readings = namedtuple("Readings", "propagation dt cloud_std div_reinit collapse_spread")
 
-# measurement model of the map-aware kernels (filters/likelihood.py): use them (``mapaware``),
-# beam density code (``kind``, options.LIKELIHOOD) and Student-t degrees of freedom ``nu``,
-# and ``grids`` (ny, nx, 2): the navigation map's heights and its representation-variance grid
-# (terrain/representation.py) interleaved node by node (``terrain.grid.stack_grids``)
-Likelihood = namedtuple("Likelihood", "mapaware kind nu grids")
+# measurement model (filters/likelihood.py): the map-aware density (``mapaware``: the beam
+# variance includes the map's variance grid, whose coefficients then follow the map's in the
+# loop's cell table, terrain.grid.cell_grid), the beam density code (``kind``,
+# options.LIKELIHOOD) and the Student-t degrees of freedom ``nu``
+Likelihood = namedtuple("Likelihood", "mapaware kind nu")
 
 # divergence guards: a horizontal cloud std above ``spread_limit`` m (once converged) counts
 # as a bad update; a cloud std below ``healthy_std`` with a good fit is "healthy" (recovery

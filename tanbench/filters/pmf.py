@@ -41,24 +41,27 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters.likelihood import loglik_loose
+from tanbench.filters.params import Likelihood
 
 DEAD_MASS = 1e-12
 
 
 @nb.njit(cache=True)
 def grid_nodes(ce, cn, s, n, out):
-    """Node positions (n*n, 2) of a grid centred on (ce, cn) with spacing s, row-major (north rows)."""
+    """Node positions (2, n*n: east row, north row) of a grid centred on (ce, cn) with spacing s,
+    nodes row-major (north rows): the likelihood kernels' layout (a column per position)."""
     c = 0.5 * (n - 1)
     for i in range(n):
         for j in range(n):
-            out[i * n + j, 0] = ce + (j - c) * s
-            out[i * n + j, 1] = cn + (i - c) * s
+            out[0, i * n + j] = ce + (j - c) * s
+            out[1, i * n + j] = cn + (i - c) * s
 
 
 def grid_nodes_numpy(ce, cn, s, n):
+    """Plain-numpy reference of :func:`grid_nodes`."""
     c = 0.5 * (n - 1)
     jj, ii = np.meshgrid(np.arange(n), np.arange(n))
-    return np.stack([ce + (jj.ravel() - c) * s, cn + (ii.ravel() - c) * s], axis=1)
+    return np.stack([ce + (jj.ravel() - c) * s, cn + (ii.ravel() - c) * s])
 
 
 @nb.njit(cache=True)
@@ -136,7 +139,7 @@ def resample_grid_numpy(p, ce, cn, s, ce_new, cn_new, s_new):
     n = p.shape[0]
     c = 0.5 * (n - 1)
     nodes = grid_nodes_numpy(ce_new, cn_new, s_new, n)
-    v = bilinear_numpy(p, ce - c * s, cn - c * s, 1.0 / s, 1.0 / s, nodes[:, 0], nodes[:, 1])
+    v = bilinear_numpy(p, ce - c * s, cn - c * s, 1.0 / s, 1.0 / s, nodes[0], nodes[1])
     return np.nan_to_num(v, nan=0.0).reshape(n, n)
 
 
@@ -177,9 +180,9 @@ def slice_moments_numpy(p, ce, cn, s):
     m = w.sum()
     if m <= 0:
         return 0.0, ce, cn, 0.0, 0.0, 0.0
-    mu = w @ nodes / m
-    d = nodes - mu
-    return (m, mu[0], mu[1], w @ (d[:, 0] ** 2) / m, w @ (d[:, 1] ** 2) / m, w @ (d[:, 0] * d[:, 1]) / m)
+    mu = nodes @ w / m
+    d = nodes - mu[:, None]
+    return (m, mu[0], mu[1], w @ (d[0] ** 2) / m, w @ (d[1] ** 2) / m, w @ (d[0] * d[1]) / m)
 
 
 @nb.njit(cache=True)
@@ -222,7 +225,7 @@ def pmf_init(p, centres, deltas, centre_e, centre_n, sig_heading0):
 
 
 @nb.njit(cache=True)
-def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, z, e0, n0, inv_re, inv_rn,
+def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, grid,
              n, deltas, sig_heading0, half_side, sig_pos, sig_cross, sig_heading_step, s_min,
              sig_u, outside_sigma, div_sigma, div_steps,
              est, var, reinit_out, live_out):
@@ -230,7 +233,8 @@ def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, z, e0, n0, inv_re, inv_rn,
 
     ``nav_en`` (K, 2), ``nav_up`` (K,), ``nav_yaw`` (K,): navigation solution at the updates;
     ``d0`` (K-1, 2): its displacements; ``offsets`` (K, m, 3): beam vectors times ranges in
-    the navigation frame with the navigation attitude (NaN = no range). ``deltas`` (H,) heading
+    the navigation frame with the navigation attitude (NaN = no range); ``grid`` the navigation
+    map as the likelihood reads it (``terrain.grid.NodeGrid``). ``deltas`` (H,) heading
     offsets (rad); ``sig_pos`` position noise per update (m); ``sig_cross`` cross-track noise
     per metre travelled (rad: the heading uncertainty inside one slice);
     ``sig_heading_step`` heading random walk per update (rad).
@@ -244,7 +248,8 @@ def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, z, e0, n0, inv_re, inv_rn,
     mixed = np.empty((h, n, n))
     buf = np.empty((n, n))
     centres = np.empty((h, 2))
-    nodes = np.empty((n * n, 2))
+    nodes = np.empty((2, n * n))
+    plain = Likelihood(False, 0, 4.0)
     ll = np.empty((h, n * n))
     rot = np.empty((m_beams, 3))
     mom = np.empty((h, 6))
@@ -290,7 +295,7 @@ def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, z, e0, n0, inv_re, inv_rn,
                 rot[i, 1] = sn * offsets[k, i, 0] + c * offsets[k, i, 1]
                 rot[i, 2] = offsets[k, i, 2]
             grid_nodes(centres[q, 0], centres[q, 1], s, n, nodes)
-            b = loglik_loose(nodes, rot, nav_up[k], z, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, ll[q])
+            b = loglik_loose(nodes, rot, nav_up[k], grid, plain, sig_u, outside_sigma, ll[q])
             if b < best:
                 best = b
             flat = p[q].reshape(n * n)
@@ -380,6 +385,7 @@ def run_pmf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, beams, ranges, zargs, 
     and the number of slices evaluated.
     """
     from tanbench.filters.beams import nav_frame_offsets
+    from tanbench.terrain.grid import node_grid_of
 
     nav_en = np.ascontiguousarray(nav_en, dtype=float)
     k_steps = nav_en.shape[0]
@@ -399,7 +405,7 @@ def run_pmf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, beams, ranges, zargs, 
     reinit = np.zeros(k_steps, dtype=np.int64)
     live = np.zeros(k_steps, dtype=np.int64)
     pmf_loop(nav_en, np.ascontiguousarray(nav_up, dtype=float), np.ascontiguousarray(nav_yaw, dtype=float),
-             d0, offsets, *zargs, int(cells), deltas, sig0, initial_area_m / 2.0, sig_pos, sig_cross,
+             d0, offsets, node_grid_of(*zargs), int(cells), deltas, sig0, initial_area_m / 2.0, sig_pos, sig_cross,
              math.radians(heading_drift_deg_sqrt_s) * math.sqrt(sampling_time_s), min_spacing_m,
              sig_u, outside_sigma, div_sigma, div_steps, est, var, reinit, live)
     return {"est_e": est[:, 0], "est_n": est[:, 1], "est_yaw": est[:, 2],

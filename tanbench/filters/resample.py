@@ -1,5 +1,9 @@
 """Weights and resampling: log-sum-exp normalisation, ESS, four resampling schemes, roughening.
 
+Particles are the columns of ``x`` (a row per state). Sums run over four interleaved
+accumulators added in a fixed order (``estimate.py`` says why); the exponentials are
+``vecmath.exp_nonpositive``, so the weight loops compile to SIMD instructions.
+
 Each scheme maps normalised weights and uniform draws (supplied by the caller, so the
 jitted kernels and their numpy references see the same random numbers) to ancestor
 indices:
@@ -28,12 +32,46 @@ import math
 import numba as nb
 import numpy as np
 
-from tanbench.filters.rng import resampling_draws
+from tanbench.filters import FASTMATH
+from tanbench.filters.rng import fill_normals, fill_uniforms
+from tanbench.filters.vecmath import exp_nonpositive
 from tanbench.options import REGULARISATION, RESAMPLING
 
 SYSTEMATIC, MULTINOMIAL, STRATIFIED, RESIDUAL = (RESAMPLING[k] for k in ("systematic", "multinomial",
                                                                          "stratified", "residual"))
 REG_NONE, REG_LIU_WEST, REG_GORDON = (REGULARISATION[k] for k in ("none", "liu-west", "gordon"))
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def sum4(a):
+    """sum(a) over four interleaved accumulators, added in a fixed order."""
+    m = a.shape[0]
+    m4 = m - m % 4
+    s0 = s1 = s2 = s3 = 0.0
+    for j in range(0, m4, 4):
+        s0 += a[j]
+        s1 += a[j + 1]
+        s2 += a[j + 2]
+        s3 += a[j + 3]
+    for j in range(m4, m):
+        s0 += a[j]
+    return (s0 + s1) + (s2 + s3)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def sum_sq4(a):
+    """sum(a^2), as :func:`sum4`."""
+    m = a.shape[0]
+    m4 = m - m % 4
+    s0 = s1 = s2 = s3 = 0.0
+    for j in range(0, m4, 4):
+        s0 += a[j] * a[j]
+        s1 += a[j + 1] * a[j + 1]
+        s2 += a[j + 2] * a[j + 2]
+        s3 += a[j + 3] * a[j + 3]
+    for j in range(m4, m):
+        s0 += a[j] * a[j]
+    return (s0 + s1) + (s2 + s3)
 
 
 @nb.njit(cache=True)
@@ -46,14 +84,19 @@ def max_log_weight(logw):
     return mx
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def exp_weights(logw, mx, w):
     """Unnormalised weights ``w = exp(logw - mx)``; returns their sum."""
-    total = 0.0
     for j in range(logw.shape[0]):
-        w[j] = math.exp(logw[j] - mx)
-        total += w[j]
-    return total
+        w[j] = exp_nonpositive(logw[j] - mx)
+    return sum4(w)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _divide(w, total):
+    inv = 1.0 / total
+    for j in range(w.shape[0]):
+        w[j] *= inv
 
 
 @nb.njit(cache=True)
@@ -61,33 +104,30 @@ def normalize_log_weights(logw, w):
     """Normalised weights into ``w`` from log-weights; returns log of the mean likelihood."""
     mx = max_log_weight(logw)
     total = exp_weights(logw, mx, w)
-    for j in range(logw.shape[0]):
-        w[j] /= total
+    _divide(w, total)
     return mx + math.log(total / logw.shape[0])
 
 
 @nb.njit(cache=True)
 def normalise_with_ess(logw, mx, w):
-    """:func:`normalize_log_weights` into ``w`` given the largest log-weight ``mx``, with the
-    :func:`effective_sample_size` of the result (returned) computed in the dividing pass:
-    the same numbers as the two kernels, in two passes instead of four."""
+    """:func:`normalize_log_weights` into ``w`` given the largest log-weight ``mx``; returns the
+    :func:`effective_sample_size` of the result."""
     total = exp_weights(logw, mx, w)
-    sum_sq = 0.0
+    _divide(w, total)
+    return effective_sample_size(w)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _add(logw, ll):
     for j in range(logw.shape[0]):
-        w[j] /= total
-        sum_sq += w[j] * w[j]
-    return 1.0 / sum_sq
+        logw[j] += ll[j]
 
 
 @nb.njit(cache=True)
 def add_log_weights(logw, ll):
     """``logw += ll``; returns the largest log-weight (as :func:`max_log_weight`)."""
-    mx = -np.inf
-    for j in range(logw.shape[0]):
-        logw[j] += ll[j]
-        if logw[j] > mx:
-            mx = logw[j]
-    return mx
+    _add(logw, ll)
+    return max_log_weight(logw)
 
 
 def normalize_log_weights_numpy(logw):
@@ -101,10 +141,7 @@ def normalize_log_weights_numpy(logw):
 @nb.njit(cache=True)
 def effective_sample_size(w):
     """1 / sum(w^2) of normalised weights."""
-    s = 0.0
-    for j in range(w.shape[0]):
-        s += w[j] * w[j]
-    return 1.0 / s
+    return 1.0 / sum_sq4(w)
 
 
 @nb.njit(cache=True)
@@ -174,108 +211,134 @@ def resample_indices_numpy(scheme, w, uniforms):
     return np.concatenate([idx, extra])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def apply_resample(x, idx, scratch):
-    """Replace the rows of ``x`` by ``x[idx]`` (``scratch`` is a same-shaped buffer)."""
-    for k in range(idx.shape[0]):
-        for c in range(x.shape[1]):
-            scratch[k, c] = x[idx[k], c]
-    for k in range(x.shape[0]):
-        for c in range(x.shape[1]):
-            x[k, c] = scratch[k, c]
+    """Replace the columns of ``x`` (nrows, M) by ``x[:, idx]`` (``scratch`` is a same-shaped buffer)."""
+    for c in range(x.shape[0]):
+        row = x[c]
+        out = scratch[c]
+        for k in range(idx.shape[0]):
+            out[k] = row[idx[k]]
+        for k in range(idx.shape[0]):
+            row[k] = out[k]
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _row_range(row):
+    lo = np.inf
+    hi = -np.inf
+    for j in range(row.shape[0]):
+        lo = min(lo, row[j])
+        hi = max(hi, row[j])
+    return lo, hi
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _add_scaled(row, s, noise):
+    for j in range(row.shape[0]):
+        row[j] += s * noise[j]
 
 
 @nb.njit(cache=True)
-def roughen(x, cols, k_rough, dim, noise):
-    """Add N(0, (K * range * M^(-1/dim))^2) to columns ``cols``; ``noise`` (M, len(cols))."""
-    m = x.shape[0]
-    factor = k_rough * m ** (-1.0 / dim)
-    for ci in range(cols.shape[0]):
-        c = cols[ci]
-        lo = np.inf
-        hi = -np.inf
-        for j in range(m):
-            v = x[j, c]
-            if v < lo:
-                lo = v
-            if v > hi:
-                hi = v
-        s = factor * (hi - lo)
-        for j in range(m):
-            x[j, c] += s * noise[j, ci]
+def roughen(x, rows, k_rough, dim, noise):
+    """Add N(0, (K * range * M^(-1/dim))^2) to rows ``rows`` of ``x``; ``noise`` (len(rows), M)."""
+    factor = k_rough * x.shape[1] ** (-1.0 / dim)
+    for ci in range(rows.shape[0]):
+        lo, hi = _row_range(x[rows[ci]])
+        _add_scaled(x[rows[ci]], factor * (hi - lo), noise[ci])
 
 
-def roughen_numpy(x, cols, k_rough, dim, noise):
+def roughen_numpy(x, rows, k_rough, dim, noise):
     """Plain-numpy reference of :func:`roughen` (returns a new array)."""
     x = x.copy()
-    spread = x[:, cols].max(axis=0) - x[:, cols].min(axis=0)
-    x[:, cols] += k_rough * x.shape[0] ** (-1.0 / dim) * spread * noise
+    spread = x[rows].max(axis=1) - x[rows].min(axis=1)
+    x[rows] += k_rough * x.shape[1] ** (-1.0 / dim) * spread[:, None] * noise
     return x
 
 
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _shrink_row(row, a, shift, s, noise):
+    for j in range(row.shape[0]):
+        row[j] = a * row[j] + shift + s * noise[j]
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _centred_sum_sq(row, mean):
+    m = row.shape[0]
+    m4 = m - m % 4
+    s0 = s1 = s2 = s3 = 0.0
+    for j in range(0, m4, 4):
+        s0 += (row[j] - mean) ** 2
+        s1 += (row[j + 1] - mean) ** 2
+        s2 += (row[j + 2] - mean) ** 2
+        s3 += (row[j + 3] - mean) ** 2
+    for j in range(m4, m):
+        s0 += (row[j] - mean) ** 2
+    return (s0 + s1) + (s2 + s3)
+
+
 @nb.njit(cache=True)
-def shrink_jitter(x, cols, h, noise):
-    """Liu-West kernel jitter of columns ``cols``: mean and variance preserving; ``noise`` (M, len(cols))."""
-    m = x.shape[0]
+def shrink_jitter(x, rows, h, noise):
+    """Liu-West kernel jitter of rows ``rows``: mean and variance preserving; ``noise`` (len(rows), M)."""
+    m = x.shape[1]
     a = math.sqrt(1.0 - h * h)
-    for ci in range(cols.shape[0]):
-        c = cols[ci]
-        mean = 0.0
-        for j in range(m):
-            mean += x[j, c]
-        mean /= m
-        var = 0.0
-        for j in range(m):
-            var += (x[j, c] - mean) ** 2
-        s = h * math.sqrt(var / m)
-        for j in range(m):
-            x[j, c] = a * x[j, c] + (1.0 - a) * mean + s * noise[j, ci]
+    for ci in range(rows.shape[0]):
+        row = x[rows[ci]]
+        mean = sum4(row) / m
+        s = h * math.sqrt(_centred_sum_sq(row, mean) / m)
+        _shrink_row(row, a, (1.0 - a) * mean, s, noise[ci])
 
 
-def shrink_jitter_numpy(x, cols, h, noise):
+def shrink_jitter_numpy(x, rows, h, noise):
     """Plain-numpy reference of :func:`shrink_jitter` (returns a new array)."""
     x = x.copy()
-    v = x[:, cols]
+    v = x[rows]
     a = math.sqrt(1.0 - h * h)
-    x[:, cols] = a * v + (1 - a) * v.mean(axis=0) + h * v.std(axis=0) * noise
+    x[rows] = a * v + (1 - a) * v.mean(axis=1, keepdims=True) + h * v.std(axis=1, keepdims=True) * noise
     return x
 
 
 @nb.njit(cache=True)
-def regularise(x, rng, kind, cols, size, dim):
-    """Draw the jitter from ``rng`` and apply ``shrink_jitter`` (h = size) or ``roughen`` (K = size)."""
+def regularise(x, rng, kind, rows, size, dim):
+    """Draw the jitter from ``rng`` (``rng.fill_normals``: (len(rows), M), row by row) and apply
+    ``shrink_jitter`` (h = size) or ``roughen`` (K = size)."""
     if kind == REG_NONE:
         return
-    noise = np.empty((x.shape[0], cols.shape[0]))
-    for j in range(x.shape[0]):
-        for c in range(cols.shape[0]):
-            noise[j, c] = rng.standard_normal()
+    noise = np.empty((rows.shape[0], x.shape[1]))
+    fill_normals(rng, noise)
     if kind == REG_LIU_WEST:
-        shrink_jitter(x, cols, size, noise)
+        shrink_jitter(x, rows, size, noise)
     else:
-        roughen(x, cols, size, dim, noise)
+        roughen(x, rows, size, dim, noise)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _shift_log_weights(logw):
+    mx = max_log_weight(logw)
+    for j in range(logw.shape[0]):
+        logw[j] -= mx
 
 
 @nb.njit(cache=True)
 def resample_and_regularise(x, w, logw, ess, rng, rs, dim, spread, uni, idx, scratch):
     """The end of an update, shared by the filters: keep log-weights bounded; if the ESS is
-    below ``rs.ess_threshold * M`` resample, regularise ``rs.cols`` and, if the horizontal
-    cloud (columns 0 and 1, std ``spread``) has collapsed below ``rs.min_spread``, re-spread
-    it. ``rs`` is a :class:`tanbench.filters.params.Resampling`."""
-    m = x.shape[0]
-    mx = logw.max()
-    for j in range(m):
-        logw[j] -= mx
+    below ``rs.ess_threshold * M`` resample (drawing one uniform for the systematic scheme, M
+    for the others), regularise rows ``rs.cols`` and, if the horizontal cloud (rows 0 and 1,
+    std ``spread``) has collapsed below ``rs.min_spread``, re-spread it. ``rs`` is a
+    :class:`tanbench.filters.params.Resampling`."""
+    m = x.shape[1]
+    _shift_log_weights(logw)
     if ess >= rs.ess_threshold * m:
         return
-    for j in range(resampling_draws(rng, rs.scheme == SYSTEMATIC, m)):
-        uni[j] = rng.random()
+    draws = uni[:1] if rs.scheme == SYSTEMATIC else uni
+    fill_uniforms(rng, draws)
     resample_indices(rs.scheme, w, uni, idx)
     apply_resample(x, idx, scratch)
     regularise(x, rng, rs.kind, rs.cols, rs.size, dim)
     logw[:] = 0.0
     if spread < rs.min_spread:
+        noise = scratch[:2]
+        fill_normals(rng, noise)
         s = rs.min_spread / math.sqrt(2.0)
-        for j in range(m):
-            x[j, 0] += s * rng.standard_normal()
-            x[j, 1] += s * rng.standard_normal()
+        _add_scaled(x[0], s, noise[0])
+        _add_scaled(x[1], s, noise[1])

@@ -1,27 +1,33 @@
-"""A fast random number generator for the jitted filter loops (``filter.random_numbers: fast``).
+"""Random numbers for the jitted filter loops: block fills from a vectorised generator.
 
-The loops draw their noise as ``rng.standard_normal()``, ``rng.random()`` and
-``rng.uniform(low, high)``. With ``random_numbers: numpy`` (the neutral value) ``rng``
-is the run's ``numpy.random.Generator``; numba then calls the bit generator through a
-function pointer for every 64-bit word. With ``fast`` it is a :class:`FastRng`, a
-numba type with the same three methods, compiled inline into the loops:
+The loops draw their noise in blocks, a whole (rows, M) array per call, with
+:func:`fill_normals` and :func:`fill_uniforms`. What they draw from is chosen by
+``filter.random_numbers`` (:func:`loop_rng`):
 
-* xoshiro256++ (Blackman & Vigna 2018, prng.di.unimi.it): 256 bits of state in a
-  ``uint64[4]`` array, one 64-bit word per step;
-* uniforms as the top 53 bits of a word times 2^-53, in [0, 1) (as numpy's
-  ``next_double``);
-* standard normals by the ziggurat method (Marsaglia & Tsang 2000) with 256 layers,
-  using independent bits of one word for the layer (bits 0-7), the sign (bit 8) and
-  the abscissa (bits 12-63, 52 bits), so layer and value are not correlated (the flaw
-  Doornik 2005 found in the original 32-bit version). The tables are computed here
-  from the normal density, the base-layer edge ``r`` by bisection; the tail beyond
-  ``r`` is sampled exactly by Marsaglia's exponential rejection. The method is exact:
-  the tests check moments and a Kolmogorov-Smirnov test against N(0, 1).
+* ``fast`` (the default): xoshiro256++ (Blackman & Vigna 2018, prng.di.unimi.it) in
+  :data:`LANES` independent lanes, whose 256-bit states sit in a ``uint64`` array
+  (:class:`FastRng` holds it; the loops are given the array itself). The lanes are
+  stepped together, so the word loop compiles to SIMD instructions; word ``r * LANES + l``
+  of a block is lane ``l``'s ``r``-th word. Normals come from those words by the ziggurat
+  method (Marsaglia & Tsang 2000) with 256 layers, using independent bits of one word for
+  the layer (bits 0-7), the sign (bit 8) and the abscissa (bits 12-63), so layer and value
+  are not correlated (the flaw Doornik 2005 found in the original 32-bit version); the
+  tables are computed here from the normal density, the base-layer edge ``r`` by
+  bisection. About 1.2 % of words miss their layer's rectangle: the wedge test and the
+  tail (Marsaglia's exponential rejection) then draw further words from a scalar
+  xoshiro256++ stream kept after the lanes. The method is exact: the tests check moments
+  and Kolmogorov-Smirnov against N(0, 1). Uniforms are the top 52 bits of a word in
+  [0, 1) (one float64 mantissa: the exponent trick vectorises, an integer conversion does
+  not). A generator is seeded from the run's ``SeedSequence`` on a stream of its own
+  (:meth:`FastRng.from_seed`), so a run's numbers depend only on its seed, never on the
+  worker count or on which process runs it;
+* ``numpy``: the run's ``numpy.random.Generator``; on PCG64 (numpy's default) the fills
+  step its state inline (:class:`Pcg64Stream`): exactly the numbers the Generator would
+  give, one after the other, and its state advanced as if it had drawn them.
 
-A ``FastRng`` is seeded from the run's ``SeedSequence`` (:meth:`FastRng.from_seed`) on
-a stream of its own, so a run's numbers depend only on its seed, never on the worker
-count or on which process runs it. ``xoshiro_numpy`` and ``normal_numpy`` are the
-plain-Python references the tests check the jitted generator against.
+``xoshiro_numpy``, ``lane_words_numpy``, ``normals_from_words_numpy`` and
+``uniforms_from_words_numpy`` are the plain-Python references the tests check the jitted
+generator against.
 """
 
 from __future__ import annotations
@@ -31,15 +37,25 @@ import math
 import numba as nb
 import numpy as np
 from llvmlite import ir
-from numba.core import cgutils, types
-from numba.extending import (NativeValue, intrinsic, make_attribute_wrapper, models, overload, overload_method,
-                             register_model, typeof_impl, unbox)
+from numba.core import types
+from numba.core.types.npytypes import NumPyRandomGeneratorType
+from numba.extending import (intrinsic, make_attribute_wrapper, models, overload, register_model, typeof_impl,
+                             unbox)
+from numba.core import cgutils
+from numba.extending import NativeValue
 from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 
-STATE_WORDS = 4
+from tanbench.filters import FASTMATH
+from tanbench.filters.vecmath import bits_float
+
+STATE_WORDS = 4  # one xoshiro256++ state
+LANES = 16  # lanes stepped together (4 AVX2 vectors of 4 words)
+FAST_WORDS = STATE_WORDS * LANES + STATE_WORDS  # the lanes' states, then the scalar stream's
 FAST_STREAM = 0xFA57  # appended to the run's spawn key: the fast generator's own stream
 LAYERS = 256
 MASK64 = (1 << 64) - 1
+ONE_BITS = 0x3FF0000000000000  # the bits of 1.0
+CHUNK = 512  # words made per pass of the lane loop (a multiple of LANES)
 
 
 # ---- ziggurat tables -------------------------------------------------------------------
@@ -88,7 +104,7 @@ def ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 ZIG_KI, ZIG_WI, ZIG_FI, ZIG_R = ziggurat_tables()
 
 
-# ---- the jitted generator ----------------------------------------------------------------
+# ---- xoshiro256++ -------------------------------------------------------------------------
 @nb.njit(cache=True, inline="always")
 def _rotl(x, k):
     return (x << np.uint64(k)) | (x >> np.uint64(64 - k))
@@ -112,8 +128,39 @@ def next_u64(s):
 
 @nb.njit(cache=True, inline="always")
 def uniform01(s):
-    """A uniform double in [0, 1): the word's top 53 bits times 2^-53."""
+    """A uniform double in [0, 1) from the scalar stream ``s``: a word's top 53 bits times 2^-53."""
     return np.float64(next_u64(s) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@nb.njit(cache=True, inline="always")
+def word_uniform(w):
+    """A uniform double in [0, 1) from a word's top 52 bits (bits of [1, 2), minus 1)."""
+    return bits_float(np.int64((w >> np.uint64(12)) | np.uint64(ONE_BITS))) - 1.0
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def lane_words(words, out):
+    """Fill ``out`` (uint64, length a multiple of LANES) from the lanes of ``words`` (a fast
+    generator's state, advanced): word ``r * LANES + l`` is lane ``l``'s ``r``-th. The lanes
+    are independent, so the loop over them is SIMD."""
+    for r in range(out.shape[0] // LANES):
+        base = r * LANES
+        for lane in range(LANES):
+            s0 = words[lane]
+            s1 = words[LANES + lane]
+            s2 = words[2 * LANES + lane]
+            s3 = words[3 * LANES + lane]
+            out[base + lane] = _rotl(s0 + s3, 23) + s0
+            t = s1 << np.uint64(17)
+            s2 ^= s0
+            s3 ^= s1
+            s1 ^= s2
+            s0 ^= s3
+            s2 ^= t
+            words[lane] = s0
+            words[LANES + lane] = s1
+            words[2 * LANES + lane] = s2
+            words[3 * LANES + lane] = _rotl(s3, 45)
 
 
 @nb.njit(cache=True)
@@ -127,9 +174,10 @@ def _normal_tail(s, negative):
 
 
 @nb.njit(cache=True)
-def _normal_slow(s, u):
-    """The rest of the ziggurat for a word ``u`` that missed its layer's rectangle (about 1 %
-    of draws): the tail, a wedge test, or new words until one is accepted."""
+def normal_slow(s, u):
+    """The rest of the ziggurat for a word ``u`` that missed its layer's rectangle (about 1.2 %
+    of words): the tail, a wedge test, or new words from the scalar stream ``s`` until one
+    is accepted."""
     while True:
         i = np.intp(u & np.uint64(0xFF))
         negative = (u >> np.uint64(8)) & np.uint64(1)
@@ -144,146 +192,47 @@ def _normal_slow(s, u):
         u = next_u64(s)
 
 
-@nb.njit(cache=True, inline="always")
-def standard_normal(s):
-    """A standard normal by the 256-layer ziggurat on state ``s``: the fast path (one word,
-    one table compare) is inlined into the caller; the rest is :func:`_normal_slow`."""
-    u = next_u64(s)
-    i = np.intp(u & np.uint64(0xFF))
-    rabs = u >> np.uint64(12)
-    if rabs < ZIG_KI[i]:
-        x = np.float64(rabs) * ZIG_WI[i]
-        return -x if (u >> np.uint64(8)) & np.uint64(1) else x
-    return _normal_slow(s, u)
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def normals_from_words(w, s, out):
+    """Ziggurat normals into ``out`` from the words ``w`` (one each), the rare misses finished
+    from the scalar stream ``s``. The sign is applied by a multiplication, not a branch."""
+    for j in range(out.shape[0]):
+        u = w[j]
+        i = np.intp(u & np.uint64(0xFF))
+        rabs = u >> np.uint64(12)
+        sign = 1.0 - 2.0 * np.float64(np.int64((u >> np.uint64(8)) & np.uint64(1)))
+        if rabs < ZIG_KI[i]:
+            out[j] = np.float64(np.int64(rabs)) * ZIG_WI[i] * sign
+        else:
+            out[j] = normal_slow(s, u)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def uniforms_from_words(w, low, high, out):
+    """``low + (high - low) u`` into ``out``, u uniform in [0, 1) from the words ``w``."""
+    scale = high - low
+    for j in range(out.shape[0]):
+        out[j] = low + scale * word_uniform(w[j])
 
 
 @nb.njit(cache=True)
-def fill_u64(s, out):
-    for j in range(out.shape[0]):
-        out[j] = next_u64(s)
-
-
-@nb.njit(cache=True)
-def fill_uniform(s, out):
-    for j in range(out.shape[0]):
-        out[j] = uniform01(s)
-
-
-@nb.njit(cache=True)
-def fill_standard_normal(s, out):
-    for j in range(out.shape[0]):
-        out[j] = standard_normal(s)
-
-
-# ---- the generator object the loops are given ----------------------------------------------
-class FastRng:
-    """xoshiro256++ with a ziggurat normal; in jitted code it offers ``standard_normal()``,
-    ``random()``, ``uniform(low, high)`` and ``normal(loc, scale)`` like a numpy Generator."""
-
-    def __init__(self, state):
-        state = np.ascontiguousarray(state, dtype=np.uint64).copy()
-        if state.shape != (STATE_WORDS,):
-            raise ValueError(f"a FastRng state is {STATE_WORDS} uint64 words, got shape {state.shape}")
-        if not state.any():
-            raise ValueError("a FastRng state must not be all zeros")
-        self.state = state
-        self._address = state.ctypes.data  # what jitted code sees (no reference counting per draw)
-
-    @classmethod
-    def from_seed(cls, seed: np.random.SeedSequence) -> "FastRng":
-        """The generator of a run's seed, on its own stream (``FAST_STREAM`` added to the spawn key)."""
-        own = np.random.SeedSequence(seed.entropy, spawn_key=tuple(seed.spawn_key) + (FAST_STREAM,),
-                                     pool_size=seed.pool_size)
-        state = own.generate_state(STATE_WORDS, np.uint64)
-        if not state.any():  # probability 2^-256; xoshiro's one forbidden state
-            state[0] = 1
-        return cls(state)
-
-    # plain-Python use (tests, set-up code): the same streams as inside the loops
-    def standard_normal(self, size: int | None = None):
-        out = np.empty(1 if size is None else int(size))
-        fill_standard_normal(self.state, out)
-        return float(out[0]) if size is None else out
-
-    def random(self, size: int | None = None):
-        out = np.empty(1 if size is None else int(size))
-        fill_uniform(self.state, out)
-        return float(out[0]) if size is None else out
-
-    def uniform(self, low: float = 0.0, high: float = 1.0, size: int | None = None):
-        return low + (high - low) * self.random(size)
-
-    def normal(self, loc: float = 0.0, scale: float = 1.0, size: int | None = None):
-        return loc + scale * self.standard_normal(size)
-
-
-class FastRngType(types.Type):
-    def __init__(self):
-        super().__init__(name="FastRng")
-
-
-fast_rng_type = FastRngType()
-_STATE_POINTER = types.CPointer(types.uint64)
-
-
-@typeof_impl.register(FastRng)
-def _typeof_fast_rng(val, c):
-    return fast_rng_type
-
-
-@register_model(FastRngType)
-class _FastRngModel(models.StructModel):
-    def __init__(self, dmm, fe_type):
-        super().__init__(dmm, fe_type, [("state", _STATE_POINTER)])
-
-
-def _unbox_state_words(typ, obj, c):
-    """A stream's native form is a pointer to its state words (``obj._address``), borrowed for
-    the call (the Python object keeps the memory alive; draws advance it). A pointer, not an
-    array, so a draw costs no reference counting."""
-    addr_obj = c.pyapi.object_getattr_string(obj, "_address")
-    addr = c.pyapi.long_as_voidptr(addr_obj)
-    c.pyapi.decref(addr_obj)
-    rng = cgutils.create_struct_proxy(typ)(c.context, c.builder)
-    rng.state = c.builder.bitcast(addr, c.context.get_value_type(_STATE_POINTER))
-    return NativeValue(rng._getvalue(), is_error=cgutils.is_not_null(c.builder, c.pyapi.err_occurred()))
-
-
-def _register_draws(stream_type, draw_normal, draw_double) -> None:
-    """Give ``stream_type`` (a numba type holding ``state``, a pointer to its words) the
-    methods the loops call on a numpy Generator, drawing with ``draw_normal(words)`` and
-    ``draw_double(words)``; its Python objects unbox by :func:`_unbox_state_words`."""
-    make_attribute_wrapper(stream_type, "state", "state")
-    unbox(stream_type)(_unbox_state_words)
-
-    @overload_method(stream_type, "standard_normal")
-    def _ol_standard_normal(rng):
-        def impl(rng):
-            return draw_normal(rng.state)
-        return impl
-
-    @overload_method(stream_type, "random")
-    def _ol_random(rng):
-        def impl(rng):
-            return draw_double(rng.state)
-        return impl
-
-    @overload_method(stream_type, "uniform")
-    def _ol_uniform(rng, low=0.0, high=1.0):
-        def impl(rng, low=0.0, high=1.0):
-            scaled = (high - low) * draw_double(rng.state)
-            return low + scaled
-        return impl
-
-    @overload_method(stream_type, "normal")
-    def _ol_normal(rng, loc=0.0, scale=1.0):
-        def impl(rng, loc=0.0, scale=1.0):
-            scaled = scale * draw_normal(rng.state)
-            return loc + scaled
-        return impl
-
-
-_register_draws(FastRngType, standard_normal, uniform01)
+def _fast_fill(words, out, normal, low, high):
+    """Fill the 1-D ``out`` from the fast generator's state ``words``: normals, or uniforms
+    in [low, high). Words are made in chunks (a multiple of LANES); words of a chunk's last
+    round beyond ``out`` are dropped."""
+    buf = np.empty(CHUNK, dtype=np.uint64)
+    scalar = words[STATE_WORDS * LANES:]
+    n = out.shape[0]
+    start = 0
+    while start < n:
+        size = min(CHUNK, n - start)
+        made = (size + LANES - 1) // LANES * LANES
+        lane_words(words, buf[:made])
+        if normal:
+            normals_from_words(buf[:size], scalar, out[start:start + size])
+        else:
+            uniforms_from_words(buf[:size], low, high, out[start:start + size])
+        start += size
 
 
 # ---- numpy's own stream, drawn inline (``random_numbers: numpy``) -------------------------------
@@ -337,9 +286,9 @@ def _pcg64_ziggurat_draw(w):
     idx = np.intp(r & np.uint64(0xFF))
     r >>= np.uint64(8)
     rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
-    x = np.float64(rabs) * wi_double[idx]
-    if r & np.uint64(1):
-        x = -x
+    # the sign by a multiplication, not a branch (a mispredicted branch on every other draw cost
+    # more than the rest of the draw); x * -1.0 is exactly -x
+    x = np.float64(rabs) * wi_double[idx] * (1.0 - 2.0 * np.float64(r & np.uint64(1)))
     return idx, rabs, x
 
 
@@ -370,6 +319,23 @@ def pcg64_standard_normal(w):
     return _pcg64_normal_slow(w, idx, rabs, x)
 
 
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _pcg64_fill(w, out, normal, low, high):
+    """numpy's standard normals (or uniforms in [low, high)) from the PCG64 words ``w``, in order."""
+    scale = high - low
+    for j in range(out.shape[0]):
+        out[j] = pcg64_standard_normal(w) if normal else low + scale * pcg64_double(w)
+
+
+@nb.njit(cache=True)
+def _generator_fill(rng, out, normal, low, high):
+    """The same from a numba-typed numpy Generator, one draw at a time."""
+    for j in range(out.shape[0]):
+        out[j] = rng.standard_normal() if normal else rng.uniform(low, high)
+
+
 def _pcg64_words_address(generator: np.random.Generator) -> int | None:
     """Address of the PCG64 state and increment words of ``generator``, or None if it is not a
     PCG64 with the native 128-bit layout (checked against the state numpy reports)."""
@@ -387,9 +353,9 @@ def _pcg64_words_address(generator: np.random.Generator) -> int | None:
 
 
 class Pcg64Stream:
-    """A numpy Generator on PCG64, as the jitted loops draw from it: ``standard_normal()``,
-    ``random()``, ``uniform(low, high)`` and ``normal(loc, scale)`` give exactly the numbers
-    the Generator would, and advance its state. Holds the Generator (whose memory it uses)."""
+    """A numpy Generator on PCG64, as the jitted fills draw from it: exactly the numbers the
+    Generator's ``standard_normal()`` and ``uniform(low, high)`` would give, in order, its state
+    advanced as if it had drawn them. Holds the Generator (whose memory it uses)."""
 
     def __init__(self, generator: np.random.Generator):
         address = _pcg64_words_address(generator)
@@ -403,19 +369,6 @@ class Pcg64Stream:
         """The Generator's bit generator (its seed sequence, its state)."""
         return self.generator.bit_generator
 
-    # plain-Python use (set-up code): the Generator itself, on the same state
-    def standard_normal(self, size: int | None = None):
-        return self.generator.standard_normal(size)
-
-    def random(self, size: int | None = None):
-        return self.generator.random(size)
-
-    def uniform(self, low: float = 0.0, high: float = 1.0, size: int | None = None):
-        return self.generator.uniform(low, high, size)
-
-    def normal(self, loc: float = 0.0, scale: float = 1.0, size: int | None = None):
-        return self.generator.normal(loc, scale, size)
-
 
 class Pcg64StreamType(types.Type):
     def __init__(self):
@@ -423,6 +376,7 @@ class Pcg64StreamType(types.Type):
 
 
 pcg64_stream_type = Pcg64StreamType()
+_STATE_POINTER = types.CPointer(types.uint64)
 
 
 @typeof_impl.register(Pcg64Stream)
@@ -436,30 +390,104 @@ class _Pcg64StreamModel(models.StructModel):
         super().__init__(dmm, fe_type, [("state", _STATE_POINTER)])
 
 
-_register_draws(Pcg64StreamType, pcg64_standard_normal, pcg64_double)
+make_attribute_wrapper(Pcg64StreamType, "state", "state")
 
 
-def resampling_draws(rng, systematic, m):
-    """How many uniforms a resampling step draws: M with a numpy Generator (today's stream,
-    whatever the scheme), 1 with a FastRng when the scheme is systematic (it reads only one)."""
-    return m
+@unbox(Pcg64StreamType)
+def _unbox_pcg64_stream(typ, obj, c):
+    """A stream's native form is a pointer to the Generator's PCG64 words (``obj._address``),
+    borrowed for the call (the Generator keeps the memory alive; draws advance it)."""
+    addr_obj = c.pyapi.object_getattr_string(obj, "_address")
+    addr = c.pyapi.long_as_voidptr(addr_obj)
+    c.pyapi.decref(addr_obj)
+    stream = cgutils.create_struct_proxy(typ)(c.context, c.builder)
+    stream.state = c.builder.bitcast(addr, c.context.get_value_type(_STATE_POINTER))
+    return NativeValue(stream._getvalue(), is_error=cgutils.is_not_null(c.builder, c.pyapi.err_occurred()))
 
 
-@overload(resampling_draws)
-def _ol_resampling_draws(rng, systematic, m):
-    if isinstance(rng, FastRngType):
-        return lambda rng, systematic, m: 1 if systematic else m
-    return lambda rng, systematic, m: m
+# ---- the fills the loops call -------------------------------------------------------------------
+def _fill(rng, out, normal, low, high):
+    """Fill ``out`` (any shape, C-contiguous) with standard normals (``normal``) or uniforms in
+    [low, high) from ``rng``: a fast generator's state words, a :class:`Pcg64Stream` or a
+    numpy Generator. Callable from jitted and from plain Python code."""
+    _fill_jit(rng, out, normal, low, high)
+
+
+@overload(_fill)
+def _ol_fill(rng, out, normal, low, high):
+    if isinstance(rng, types.Array) and rng.dtype == types.uint64:
+        return lambda rng, out, normal, low, high: _fast_fill(rng, out.reshape(-1), normal, low, high)
+    if isinstance(rng, Pcg64StreamType):
+        return lambda rng, out, normal, low, high: _pcg64_fill(rng.state, out.reshape(-1), normal, low, high)
+    if isinstance(rng, NumPyRandomGeneratorType):
+        return lambda rng, out, normal, low, high: _generator_fill(rng, out.reshape(-1), normal, low, high)
+    return None
+
+
+@nb.njit(cache=True)
+def _fill_jit(rng, out, normal, low, high):
+    _fill(rng, out, normal, low, high)
+
+
+@nb.njit(cache=True, inline="always")
+def fill_normals(rng, out):
+    """Standard normals into ``out`` (any shape, C-contiguous), in memory order."""
+    _fill(rng, out, True, 0.0, 1.0)
+
+
+@nb.njit(cache=True, inline="always")
+def fill_uniforms(rng, out, low=0.0, high=1.0):
+    """Uniforms in [low, high) into ``out`` (any shape, C-contiguous), in memory order."""
+    _fill(rng, out, False, low, high)
+
+
+# ---- the generator objects -----------------------------------------------------------------
+class FastRng:
+    """The fast generator's state (``state``: uint64[FAST_WORDS], the lanes then the scalar
+    stream) with plain-Python draws; the jitted loops are given ``state`` itself."""
+
+    def __init__(self, state):
+        state = np.ascontiguousarray(state, dtype=np.uint64).copy()
+        if state.shape != (FAST_WORDS,):
+            raise ValueError(f"a FastRng state is {FAST_WORDS} uint64 words, got shape {state.shape}")
+        for k in range(LANES + 1):
+            words = state[k:STATE_WORDS * LANES:LANES] if k < LANES else state[STATE_WORDS * LANES:]
+            if not words.any():
+                raise ValueError("no xoshiro256++ state of a FastRng may be all zeros")
+        self.state = state
+
+    @classmethod
+    def from_seed(cls, seed: np.random.SeedSequence) -> "FastRng":
+        """The generator of a run's seed, on its own stream (``FAST_STREAM`` added to the spawn key)."""
+        own = np.random.SeedSequence(seed.entropy, spawn_key=tuple(seed.spawn_key) + (FAST_STREAM,),
+                                     pool_size=seed.pool_size)
+        state = own.generate_state(FAST_WORDS, np.uint64)
+        for k in range(LANES):  # probability 2^-256 each: xoshiro's one forbidden state
+            if not state[k:STATE_WORDS * LANES:LANES].any():
+                state[k] = 1
+        if not state[STATE_WORDS * LANES:].any():
+            state[-1] = 1
+        return cls(state)
+
+    def standard_normal(self, size: int | None = None):
+        out = np.empty(1 if size is None else int(size))
+        fill_normals(self.state, out)
+        return float(out[0]) if size is None else out
+
+    def random(self, size: int | None = None):
+        out = np.empty(1 if size is None else int(size))
+        fill_uniforms(self.state, out)
+        return float(out[0]) if size is None else out
 
 
 def loop_rng(rng: np.random.Generator, random_numbers: str):
-    """The generator a jitted loop is given: for ``numpy``, ``rng``'s own stream (a
-    :class:`Pcg64Stream` on it, or ``rng`` itself if it is not on PCG64); for ``fast`` a
-    :class:`FastRng` seeded from ``rng``'s SeedSequence (its own stream)."""
+    """What a jitted loop draws from: for ``fast`` the state words of a :class:`FastRng` seeded
+    from ``rng``'s SeedSequence (its own stream); for ``numpy`` ``rng``'s own stream (a
+    :class:`Pcg64Stream` on it, or ``rng`` itself if it is not on PCG64)."""
+    if random_numbers == "fast":
+        return FastRng.from_seed(rng.bit_generator.seed_seq).state
     if random_numbers == "numpy":
         return Pcg64Stream(rng) if _pcg64_words_address(rng) is not None else rng
-    if random_numbers == "fast":
-        return FastRng.from_seed(rng.bit_generator.seed_seq)
     raise ValueError(f"unknown random_numbers {random_numbers!r}")
 
 
@@ -484,22 +512,31 @@ def xoshiro_numpy(state, n: int) -> tuple[np.ndarray, np.ndarray]:
     return out, np.array(s, dtype=np.uint64)
 
 
-def normal_numpy(state, n: int) -> np.ndarray:
-    """Reference ziggurat normals from :func:`xoshiro_numpy` words (same tables, same bit use)."""
-    state = np.asarray(state, dtype=np.uint64).copy()
+def lane_words_numpy(words, rounds: int) -> tuple[np.ndarray, np.ndarray]:
+    """Reference of :func:`lane_words`: (rounds * LANES words, the new state words)."""
+    words = np.asarray(words, dtype=np.uint64).copy()
+    out = np.empty((rounds, LANES), dtype=np.uint64)
+    for lane in range(LANES):
+        out[:, lane], new = xoshiro_numpy(words[lane:STATE_WORDS * LANES:LANES], rounds)
+        words[lane:STATE_WORDS * LANES:LANES] = new
+    return out.reshape(-1), words
+
+
+def normals_from_words_numpy(w, scalar_state) -> np.ndarray:
+    """Reference of :func:`normals_from_words` (``scalar_state``: the scalar stream, not changed)."""
+    state = np.asarray(scalar_state, dtype=np.uint64).copy()
 
     def word():
         nonlocal state
-        w, state = xoshiro_numpy(state, 1)
-        return int(w[0])
+        out, state = xoshiro_numpy(state, 1)
+        return int(out[0])
 
     def uni():
         return (word() >> 11) * 2.0**-53
 
-    out = np.empty(n)
-    for j in range(n):
+    out = np.empty(len(w))
+    for j, u in enumerate(int(v) for v in w):
         while True:
-            u = word()
             i, negative, rabs = u & 0xFF, (u >> 8) & 1, u >> 12
             x = rabs * float(ZIG_WI[i])
             if rabs < int(ZIG_KI[i]):
@@ -514,5 +551,12 @@ def normal_numpy(state, n: int) -> np.ndarray:
                 break
             if ZIG_FI[i] + uni() * (ZIG_FI[i + 1] - ZIG_FI[i]) < math.exp(-0.5 * x * x):
                 break
+            u = word()
         out[j] = -x if negative else x
     return out
+
+
+def uniforms_from_words_numpy(w, low: float = 0.0, high: float = 1.0) -> np.ndarray:
+    """Reference of :func:`uniforms_from_words`."""
+    u = (np.asarray(w, dtype=np.uint64) >> np.uint64(12)).astype(np.float64) * 2.0**-52
+    return low + (high - low) * u

@@ -1,8 +1,9 @@
 """Tightly coupled TAN (Section 3, Algorithm 1): the 8-state particle filter loop.
 
 The loop is jitted end to end and composed of the kernels in ``propagate``,
-``likelihood``, ``resample`` and ``estimate``; random numbers come from the run's
-``numpy.random.Generator``, passed in. Per update k:
+``likelihood``, ``resample`` and ``estimate``; particles are the columns of ``x`` (8, M),
+each kernel a pass over them that compiles to SIMD instructions; random numbers come in
+blocks from the generator ``filters/rng.py`` gives the loop. Per update k:
 
 1. propagate every particle over the interval (Eq. 1; skipped at k = 0);
 2. weight by the terrain altitude innovations of the beams and the distance
@@ -35,14 +36,15 @@ import math
 import numba as nb
 import numpy as np
 
-from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters import FASTMATH
+from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (beam_constants, beam_vectors, loglik_tight_mapaware_particle,
-                                        loglik_tight_particle)
-from tanbench.filters.propagate import propagate_tight_euler_particle, propagate_tight_particle
+from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
+                                        work_block)
+from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
-from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, YAW
+from tanbench.filters.rng import fill_normals
+from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference
 
 REGULARISED_STATES = {
@@ -52,105 +54,53 @@ REGULARISED_STATES = {
 }
 
 
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _shift_scale(row, centre, std):
+    for j in range(row.shape[0]):
+        row[j] = centre + std * row[j]
+
 
 @nb.njit(cache=True)
 def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
-    """Initial cloud: uniform square of side 2 * prior.half_side around (centre_e, centre_n),
-    Gaussians else (``prior`` is a :class:`tanbench.filters.params.TightPrior`)."""
-    half_side = prior.half_side
-    for j in range(x.shape[0]):
-        x[j, 0] = centre_e + rng.uniform(-half_side, half_side)
-        x[j, 1] = centre_n + rng.uniform(-half_side, half_side)
-        x[j, 2] = up + prior.std_up * rng.standard_normal()
-        x[j, 3] = pitch + prior.std_att * rng.standard_normal()
-        x[j, 4] = roll + prior.std_att * rng.standard_normal()
-        x[j, 5] = yaw + prior.std_yaw * rng.standard_normal()
-        x[j, 6] = prior.std_bias * rng.standard_normal()
-        x[j, 7] = prior.std_bias * rng.standard_normal()
-
-
-@nb.njit(cache=True, fastmath=FASTMATH)
-def propagate_and_weigh(x, rng, propagate, inc, yaw_nav0, yaw_off, start_pitch, start_roll, euler_in, readings, model,
-                        beams, ranges, zmap, lik, ref_pitch, ref_roll, ref_yaw, ll):
-    """One pass over the particles of a tight update: for each particle, draw its six
-    propagation normals (E, N, U, pitch, roll, yaw: the same numbers in the same order as
-    filling an (M, 6) array row by row), move it (if ``propagate``: ``propagate_tight``, or
-    ``propagate_tight_euler`` if ``readings.propagation``) and weigh it (``loglik_tight`` or
-    ``loglik_tight_mapaware``, into ``ll``); the cloud is read once instead of twice and no
-    noise or innovation arrays are written. Returns the best chi^2 per beam.
-
-    The per-particle arithmetic is the array kernels' (their ``*_particle`` functions, under
-    the same flags); the log-weights are accumulated outside (``resample.add_log_weights``),
-    where no reassociation reaches them.
-
-    The particles' sines and cosines are taken about references near them (``trig``; they
-    only decide where the short series is used): the propagation about the navigation
-    heading at the interval start plus ``yaw_off``, the cloud's heading offset from the
-    navigation at the last update (and, for the Euler step, about the navigation pitch and
-    roll there, ``start_*``); the beams about ``ref_*``, which the loop sets to the
-    navigation attitude with the yaw moved by the same offset. With a navigation heading
-    off by tens of degrees, as the paper's 30 degree initial error, the offset keeps the
-    particles within the series' range instead of calling ``math.sin`` and ``math.cos``.
-    """
-    z, e0, n0, inv_re, inv_rn = zmap
-    su2, inv_u2, inv_d2, outside_sq, out2 = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
-    att = attitude_reference(ref_pitch, ref_roll, ref_yaw)
-    att0 = attitude_reference(start_pitch, start_roll, yaw_nav0 + yaw_off)
-    s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
-    vec = beam_vectors(beams, ranges)
-    used = vec.shape[0]
-    euler = readings.propagation != 0
-    best = np.inf
-    for j in range(x.shape[0]):
-        dist_e = 0.0
-        dist_n = 0.0
-        if propagate:
-            n_e = rng.standard_normal()
-            n_n = rng.standard_normal()
-            n_u = rng.standard_normal()
-            n_pitch = rng.standard_normal()
-            n_roll = rng.standard_normal()
-            n_yaw = rng.standard_normal()
-            if euler:
-                dist_e, dist_n = propagate_tight_euler_particle(x, j, euler_in, readings.dt, inc, att0, n_e, n_n,
-                                                                n_u, n_pitch, n_roll, n_yaw, model.sig_pos,
-                                                                model.sig_up, model.sig_att, model.dist_mode)
-            else:
-                dist_e, dist_n = propagate_tight_particle(x, j, inc, yaw_nav0, yaw_off, s_off, c_off, n_e, n_n, n_u,
-                                                          n_pitch, n_roll, n_yaw, model.sig_pos, model.sig_up,
-                                                          model.sig_att, model.dist_mode)
-        if lik.mapaware:
-            lj, chi = loglik_tight_mapaware_particle(x, j, vec, lik.grids, e0, n0, inv_re, inv_rn, su2,
-                                                     inv_u2, out2, att, lik.kind, lik.nu, dist_e, dist_n, inv_d2)
-        else:
-            lj, chi = loglik_tight_particle(x, j, vec, z, e0, n0, inv_re, inv_rn, inv_u2, outside_sq, att,
-                                            dist_e, dist_n, inv_d2)
-        if used > 0 and chi / used < best:
-            best = chi / used
-        ll[j] = lj
-    return best
+    """Initial cloud (``x`` (8, M)): uniform square of side 2 * prior.half_side around
+    (centre_e, centre_n), Gaussians else (``prior`` is a :class:`tanbench.filters.params.TightPrior`)."""
+    uniform_horizontal(x, rng, centre_e, centre_n, prior.half_side)
+    fill_normals(rng, x[U:])
+    _shift_scale(x[U], up, prior.std_up)
+    _shift_scale(x[PITCH], pitch, prior.std_att)
+    _shift_scale(x[ROLL], roll, prior.std_att)
+    _shift_scale(x[YAW], yaw, prior.std_yaw)
+    _shift_scale(x[BX], 0.0, prior.std_bias)
+    _shift_scale(x[BZ], 0.0, prior.std_bias)
 
 
 @nb.njit(cache=True)
-def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, zmap, model, rs, div,
+def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, grid, model, rs, div,
                       prior, readings, euler_in, lik, guard, est, var, cov_en_out, ess_out, reinit_out,
                       healthy_out):
     """Run the filter over all updates; fill est/var (K+1, 8), cov_en_out, ess_out, reinit_out and
     healthy_out (K+1,).
 
-    ``cov_en_out`` is the cloud's weighted east/north covariance (``var`` holds the variances).
+    ``x`` (8, M) is the initial cloud, a column per particle. ``cov_en_out`` is the cloud's
+    weighted east/north covariance (``var`` holds the variances). ``grid`` is the navigation
+    map's :class:`~tanbench.terrain.grid.NodeGrid` (with the variance grid interleaved for
+    the map-aware likelihood); ``model``, ``rs``, ``div``, ``prior``, ``readings``, ``lik`` and
+    ``guard`` are the bundles of :mod:`tanbench.filters.params` (TightModel, Resampling,
+    Divergence, TightPrior, Readings, Likelihood, Guard); ``euler_in`` (K, 4) the Euler-step
+    inputs (used if ``readings.propagation``). A horizontal cloud std above
+    ``guard.spread_limit``, once the cloud has converged since its last (re)initialisation,
+    counts as a bad update like a poor fit; an estimate off ``guard.bounds`` is clamped into
+    them and the cloud reinitialised there (:func:`keep_on_map`). ``healthy_out[k]`` is 1 when
+    the cloud std is below ``guard.healthy_std`` and the best fit within half the divergence
+    threshold.
 
-    ``zmap``, ``model``, ``rs``, ``div``, ``prior``, ``readings``, ``lik`` and ``guard`` are the
-    bundles of :mod:`tanbench.filters.params` (MapArgs, TightModel, Resampling, Divergence,
-    TightPrior, Readings, Likelihood, Guard); ``euler_in`` (K, 4) the Euler-step inputs (used if
-    ``readings.propagation``). ``lik.mapaware`` selects :func:`loglik_tight_mapaware` instead of
-    :func:`loglik_tight`; a horizontal cloud std above ``guard.spread_limit``, once the
-    cloud has converged since its last (re)initialisation, counts as a bad update like a
-    poor fit; an estimate off ``guard.bounds`` is clamped into them and the cloud
-    reinitialised there (:func:`keep_on_map`). ``healthy_out[k]`` is 1 when the cloud std
-    is below ``guard.healthy_std`` and the best fit within half the divergence threshold.
+    The particles' sines and cosines are taken about references near them (``trig``; they do
+    not change the result): the propagation about the navigation heading at the interval
+    start plus ``yaw_off``, the cloud's heading offset from the navigation at the last update
+    (and, for the Euler step, about the navigation pitch and roll there); the beams about the
+    navigation attitude with its yaw moved by the same offset.
     """
-    m = x.shape[0]
+    m = x.shape[1]
     steps = ranges.shape[0]
     logw = np.zeros(m)
     ll = np.empty(m)
@@ -158,21 +108,37 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
     uni = np.empty(m)
     idx = np.empty(m, dtype=np.int64)
     scratch = np.empty_like(x)
+    block = min(BLOCK, m)
+    noise_buf = np.empty(6 * block)
+    dist_buf = np.zeros(2 * block)
+    work = new_likelihood_work(block, 4 * grid.grids)
     mean = np.empty(N_TIGHT)
     v = np.empty(N_TIGHT)
     cov = np.empty((2, 2))
-    no_inc = np.zeros(inc.shape[1])  # the interval before update 0: none, nothing moves
-    no_euler = np.zeros(euler_in.shape[1])
+    su2, inv_d2, out2 = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
+    with_dist = model.dist_mode == DIST_NAVIGATION
     bad = 0
     locked = False  # the cloud has converged since the last (re)initialisation
     yaw_off = 0.0  # the cloud's heading offset from the navigation (centres the particles' trigonometry)
     for k in range(steps):
-        inc_k = inc[k - 1] if k > 0 else no_inc
-        euler_k = euler_in[k - 1] if k > 0 and readings.propagation != 0 else no_euler
-        k0 = max(k - 1, 0)
-        best = propagate_and_weigh(x, rng, k > 0, inc_k, nav_yaw[k0], yaw_off, nav_pitch[k0], nav_roll[k0], euler_k,
-                                   readings, model, beams, ranges[k], zmap, lik, nav_pitch[k], nav_roll[k],
-                                   nav_yaw[k] + yaw_off, ll)
+        vec = beam_vectors(beams, ranges[k])
+        att = attitude_reference(nav_pitch[k], nav_roll[k], nav_yaw[k] + yaw_off)
+        best = np.inf
+        for lo in range(0, m, block):  # the particle passes, block by block
+            n = min(block, m - lo)
+            dist = dist_buf[:2 * n].reshape((2, n))
+            if k > 0:
+                noise = noise_buf[:6 * n].reshape((6, n))
+                fill_normals(rng, noise)
+                if readings.propagation != 0:
+                    propagate_tight_euler(x, euler_in[k - 1], readings.dt, inc[k - 1], noise, model.sig_pos,
+                                          model.sig_up, model.sig_att, model.dist_mode, dist, nav_pitch[k - 1],
+                                          nav_roll[k - 1], nav_yaw[k - 1] + yaw_off, lo)
+                else:
+                    propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up,
+                                    model.sig_att, model.dist_mode, dist, yaw_off, lo)
+            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist, with_dist and k > 0,
+                                               inv_d2, work_block(work, n), ll[lo:lo + n]))
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)

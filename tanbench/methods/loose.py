@@ -17,14 +17,14 @@ import numpy as np
 
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.methods.tight import (divergence_bundle, guard_bundle, likelihood_bundle, measurement_sigmas,
-                                    readings_bundle, resampling_of)
+from tanbench.methods.tight import (divergence_bundle, guard_bundle, likelihood_bundle, likelihood_grid,
+                                    measurement_sigmas, readings_bundle, resampling_of)
 
 
 def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     """The loosely coupled position-only particle filter feeding fixes to the navigation system."""
-    from tanbench.filters.cloud import gaussian_horizontal
-    from tanbench.filters.loose import LOOSE_COLS, init_loose, loose_filter_loop
+    from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
+    from tanbench.filters.loose import LOOSE_COLS, loose_filter_loop
     from tanbench.filters.params import LooseModel
     from tanbench.filters.rng import loop_rng
     from tanbench.filters.state import N_LOOSE
@@ -42,8 +42,8 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
                        measurement_sigmas(f)[1], f.outside_map_sigma, f.loose_converged_std_m)
     rng = loop_rng(ctx.rng, f.random_numbers)
     readings = readings_bundle(f, T)
-    x = np.empty((sc.particles, N_LOOSE))
-    init_loose(x, rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], half)
+    x = np.empty((N_LOOSE, sc.particles))  # a column per particle
+    uniform_horizontal(x, rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], half)
     if readings.cloud_std > 0.0:
         gaussian_horizontal(x, rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], readings.cloud_std)
     k = upd.size
@@ -53,7 +53,7 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
         return _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed)
     d0 = np.ascontiguousarray(np.diff(nav.pos[upd, :2], axis=0))
     loose_filter_loop(x, rng, d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2],
-                      offsets, ctx.nmap.kernel_args(), model,
+                      offsets, likelihood_grid(f, ctx.nmap), model,
                       resampling_of(f, LOOSE_COLS), divergence_bundle(f), half, readings, out_en, var, cov_en, ess,
                       reinit,
                       fixed)
@@ -86,9 +86,9 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     out_en[0] = nav.pos[upd[0], :2]
     out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
-    loose_kalman_loop(x, rng, inc, nav.yaw[upd], nav.pos[upd, 2], offsets, ctx.nmap.kernel_args(), model,
+    loose_kalman_loop(x, rng, inc, nav.yaw[upd], nav.pos[upd, 2], offsets, likelihood_grid(f, ctx.nmap), model,
                       resampling_of(f, LOOSE_COLS), divergence_bundle(f), f.initial_area_m / 2.0,
-                      likelihood_bundle(f, ctx.nmap), guard_bundle(f, ctx.nmap), kf, p_kf,
+                      likelihood_bundle(f), guard_bundle(f, ctx.nmap), kf, p_kf,
                       out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], yaw=out_yaw, var_e=var[:, 0], var_n=var[:, 1],
                         var_heading=np.degrees(np.sqrt(var_yaw)) ** 2, ess=ess, reinit=reinit.astype(bool),

@@ -74,23 +74,31 @@ def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
                                 upd, window)
 
 
-def likelihood_bundle(f, nmap):
-    """The :class:`~tanbench.filters.params.Likelihood` bundle: the map-aware kernels run when
-    the map-aware variance or a non-Gaussian density is asked for; the variance grid is
-    the map's representation variance with the map's declared error
-    (``filter.map_aware_likelihood``), else zero (terrain/representation.py)."""
+def likelihood_bundle(f):
+    """The :class:`~tanbench.filters.params.Likelihood` bundle: the map-aware density when the
+    map-aware variance or a non-Gaussian density is asked for."""
     from tanbench.filters.params import Likelihood
     from tanbench.options import LIKELIHOOD
-    from tanbench.terrain.grid import stack_grids
-    from tanbench.terrain.representation import map_variance_grid
 
     mapaware = f.map_aware_likelihood or f.likelihood != "gaussian"
+    return Likelihood(bool(mapaware), LIKELIHOOD[f.likelihood], float(f.student_nu))
+
+
+def likelihood_grid(f, nmap):
+    """The navigation map as the particle filters read it (:class:`~tanbench.terrain.grid.NodeGrid`):
+    with the map-aware density, its variance grid interleaved with its heights: the map's
+    representation variance with its declared error (``filter.map_aware_likelihood``,
+    terrain/representation.py), or zero."""
+    from tanbench.terrain.grid import node_grid
+    from tanbench.terrain.representation import map_variance_grid
+
+    if not likelihood_bundle(f).mapaware:
+        return node_grid(nmap)
     if f.map_aware_likelihood:
         mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
     else:
-        mvar = np.where(np.isnan(nmap.z), np.nan, 0.0) if mapaware else None
-    grids = stack_grids(nmap.z, mvar) if mvar is not None else np.zeros((2, 2, 2))
-    return Likelihood(bool(mapaware), LIKELIHOOD[f.likelihood], float(f.student_nu), grids)
+        mvar = np.where(np.isnan(nmap.z), np.nan, 0.0)
+    return node_grid(nmap, mvar)
 
 
 def guard_bundle(f, nmap):
@@ -134,19 +142,19 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     prior = TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
                        math.radians(f.initial_std_heading_deg), f.initial_std_gyro_bias_deg_h * DEG_PER_H)
     rng = loop_rng(ctx.rng, f.random_numbers)
-    x = np.empty((sc.particles, N_TIGHT))
+    x = np.empty((N_TIGHT, sc.particles))  # a column per particle
     k0 = upd[0]
     init_tight(x, rng, nav.pos[k0, 0], nav.pos[k0, 1], nav.pos[k0, 2], nav.pitch[k0], nav.roll[k0],
                nav.yaw[k0], prior)
     if readings.cloud_std > 0.0:
-        gaussian_horizontal(x, ctx.rng, nav.pos[k0, 0], nav.pos[k0, 1], readings.cloud_std)
+        gaussian_horizontal(x, rng, nav.pos[k0, 0], nav.pos[k0, 1], readings.cloud_std)
     k = upd.size
     est, var, cov_en = np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k)
     ess, reinit, healthy = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
     tight_filter_loop(x, rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
-                      np.ascontiguousarray(ranges), np.ascontiguousarray(beams), ctx.nmap.kernel_args(), model,
+                      np.ascontiguousarray(ranges), np.ascontiguousarray(beams), likelihood_grid(f, ctx.nmap), model,
                       resampling_of(f, REGULARISED_STATES[f.regularised_states]), divergence_bundle(f), prior,
-                      readings, euler_inputs_of(ctx), likelihood_bundle(f, ctx.nmap), guard_bundle(f, ctx.nmap),
+                      readings, euler_inputs_of(ctx), likelihood_bundle(f), guard_bundle(f, ctx.nmap),
                       est, var, cov_en, ess, reinit, healthy)
     return MethodOutput(
         east=est[:, 0], north=est[:, 1], up=est[:, U], yaw=est[:, YAW],

@@ -104,8 +104,7 @@ EDGE_TOL = 1e-9  # grid cells
 def bilinear_cell(ny, nx, e0, n0, inv_re, inv_rn, e, n):
     """The grid cell under (e, n) of a (ny, nx) grid and the position in it: (i, j, tx, ty).
 
-    ``i`` is -1 outside the node extent. Shared by :func:`bilinear` and
-    :func:`bilinear_pair` (two grids on the same nodes, one cell look-up).
+    ``i`` is -1 outside the node extent.
     """
     fx = (e - e0) * inv_re
     fy = (n - n0) * inv_rn
@@ -135,32 +134,6 @@ def bilinear(z, e0, n0, inv_re, inv_rn, e, n):
 
 
 @nb.njit(cache=True)
-def stack_grids(z, z2):
-    """Two grids of the same shape interleaved node by node: (ny, nx, 2), ``[..., 0]`` = ``z``.
-
-    :func:`bilinear_pair` reads both values of a node from one cache line (the map-aware
-    likelihoods' map and variance grid)."""
-    ny, nx = z.shape
-    out = np.empty((ny, nx, 2))
-    for i in range(ny):
-        for j in range(nx):
-            out[i, j, 0] = z[i, j]
-            out[i, j, 1] = z2[i, j]
-    return out
-
-
-@nb.njit(cache=True, inline="always")
-def bilinear_pair(zz, e0, n0, inv_re, inv_rn, e, n):
-    """(:func:`bilinear` of ``zz[..., 0]``, of ``zz[..., 1]``) at (e, n) from one cell look-up,
-    ``zz`` from :func:`stack_grids`; (NaN, NaN) outside."""
-    i, j, tx, ty = bilinear_cell(zz.shape[0], zz.shape[1], e0, n0, inv_re, inv_rn, e, n)
-    if i < 0:
-        return np.nan, np.nan
-    return (_bilinear_weights(zz[i, j, 0], zz[i, j + 1, 0], zz[i + 1, j, 0], zz[i + 1, j + 1, 0], tx, ty),
-            _bilinear_weights(zz[i, j, 1], zz[i, j + 1, 1], zz[i + 1, j, 1], zz[i + 1, j + 1, 1], tx, ty))
-
-
-@nb.njit(cache=True)
 def bilinear_many(z, e0, n0, inv_re, inv_rn, e, n, out):
     """Vectorised :func:`bilinear` over 1-D arrays of points, into ``out``."""
     for k in range(e.shape[0]):
@@ -183,3 +156,110 @@ def bilinear_numpy(z, e0, n0, inv_re, inv_rn, e, n):
         z[i + 1, j] * (1 - tx) + z[i + 1, j + 1] * tx
     ) * ty
     return np.where(inside, val, np.nan)
+
+
+# ---- the filters' map look-ups ------------------------------------------------------------------
+# The particle filters look the map up at millions of points per run. They read it as a
+# :class:`NodeGrid`: the nodes of one or two grids on the same nodes (the map's heights, then
+# the map-aware likelihood's variance grid) interleaved node by node, so that a look-up reads
+# both from the same cache lines. The look-up is split so that the arithmetic vectorises:
+# :func:`locate_cells` (SIMD) finds each point's cell, :func:`gather_cells` copies the cell's
+# four corner nodes (two runs of two neighbouring nodes: the one scalar loop), and
+# :func:`cell_value` interpolates them in the caller's SIMD loop, as :func:`bilinear` does.
+NodeGrid = namedtuple("NodeGrid", "nodes grids e0 n0 inv_re inv_rn nx ny")
+MAX_NODES = 2**31 - 1  # node indices are int32 (they vectorise; int64 conversions do not with AVX2)
+
+
+def node_grid(grid: "Map", z2: np.ndarray | None = None) -> NodeGrid:
+    """The map as the filters read it: its heights (and a second grid ``z2`` of its shape, if
+    given) interleaved node by node, flat."""
+    return node_grid_of(*grid.kernel_args(), z2=z2)
+
+
+def node_grid_of(z, e0, n0, inv_re, inv_rn, z2=None) -> NodeGrid:
+    """:func:`node_grid` of a map given as its kernel arguments (``Map.kernel_args()``)."""
+    ny, nx = z.shape
+    if ny * nx > MAX_NODES:
+        raise ValueError(f"the navigation map has {ny * nx} nodes; the filters take at most {MAX_NODES}")
+    nodes = z if z2 is None else np.stack([z, np.asarray(z2, dtype=np.float64)], axis=-1)
+    return NodeGrid(np.ascontiguousarray(nodes, dtype=np.float64).reshape(-1), 1 if z2 is None else 2,
+                    float(e0), float(n0), float(inv_re), float(inv_rn), nx, ny)
+
+
+@nb.njit(cache=True, inline="always")
+def locate_cell(e, n, e0, n0, inv_re, inv_rn, nx, ny):
+    """(node, tx, ty) of the point (e, n): ``node`` is the index (row i * nx + column j) of its
+    cell's lower-left node, -1 outside the node extent (or for a NaN point); (tx, ty) its
+    position in the cell. Branch free (for SIMD loops)."""
+    fx = (e - e0) * inv_re
+    fy = (n - n0) * inv_rn
+    inside = (fx >= 0.0) & (fy >= 0.0) & (fx <= nx - 1 + EDGE_TOL) & (fy <= ny - 1 + EDGE_TOL)
+    jj = np.int32(min(fx, nx - 2.0) if inside else 0.0)
+    ii = np.int32(min(fy, ny - 2.0) if inside else 0.0)
+    return (ii * np.int32(nx) + jj if inside else np.int32(-1)), fx - jj, fy - ii
+
+
+@nb.njit(cache=True, error_model="numpy")
+def locate_cells(e, n, e0, n0, inv_re, inv_rn, nx, ny, cell, tx, ty):
+    """:func:`locate_cell` of every point (arrays ``e``, ``n``) into ``cell`` (int32), ``tx``, ``ty``."""
+    for j in range(e.shape[0]):
+        cell[j], tx[j], ty[j] = locate_cell(e[j], n[j], e0, n0, inv_re, inv_rn, nx, ny)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def gather_cells(cell, nodes, grids, nx, stage):
+    """Copy each point's four cell corners into column ``j`` of ``stage`` (4 grids, M): rows
+    z00, z01, z10, z11, each corner with its ``grids`` values (``NodeGrid`` order); cell 0 where
+    ``cell[j]`` is -1 (read, never used)."""
+    if grids == 2:
+        row = 2 * nx
+        for j in range(cell.shape[0]):
+            k = 2 * max(cell[j], 0)
+            for q in range(4):
+                stage[q, j] = nodes[k + q]
+                stage[4 + q, j] = nodes[k + row + q]
+    else:
+        for j in range(cell.shape[0]):
+            k = max(cell[j], 0)
+            stage[0, j] = nodes[k]
+            stage[1, j] = nodes[k + 1]
+            stage[2, j] = nodes[k + nx]
+            stage[3, j] = nodes[k + nx + 1]
+
+
+@nb.njit(cache=True, inline="always")
+def cell_corners(stage, grid, grids):
+    """The rows of ``stage`` (:func:`gather_cells`) with grid ``grid``'s (0 or 1 of ``grids``)
+    corners z00, z01, z10, z11, as 1-D views (loops over them vectorise)."""
+    return stage[grid], stage[grids + grid], stage[2 * grids + grid], stage[3 * grids + grid]
+
+
+@nb.njit(cache=True, inline="always")
+def cell_value(corners, j, tx, ty):
+    """Bilinear value at (tx, ty) of point ``j``'s cell, from its corners (:func:`cell_corners`);
+    the same arithmetic as :func:`bilinear`."""
+    z00, z01, z10, z11 = corners
+    return _bilinear_weights(z00[j], z01[j], z10[j], z11[j], tx, ty)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def cell_values(stage, cell, tx, ty, grid, grids, out):
+    """:func:`cell_value` of every point into ``out`` (NaN where ``cell`` is -1)."""
+    corners = cell_corners(stage, grid, grids)
+    for j in range(out.shape[0]):
+        v = cell_value(corners, j, tx[j], ty[j])
+        out[j] = v if cell[j] >= 0 else np.nan
+
+
+def node_grid_at(grid: NodeGrid, e, n, which: int = 0) -> np.ndarray:
+    """Grid ``which`` of ``grid`` at the points (e, n) (1-D arrays) by the three look-up kernels:
+    what the filters read (NaN outside)."""
+    e = np.ascontiguousarray(e, dtype=np.float64)
+    n = np.ascontiguousarray(n, dtype=np.float64)
+    cell, tx, ty = np.empty(e.size, dtype=np.int32), np.empty(e.size), np.empty(e.size)
+    locate_cells(e, n, grid.e0, grid.n0, grid.inv_re, grid.inv_rn, grid.nx, grid.ny, cell, tx, ty)
+    stage = np.empty((4 * grid.grids, e.size))
+    gather_cells(cell, grid.nodes, grid.grids, grid.nx, stage)
+    out = np.empty(e.size)
+    cell_values(stage, cell, tx, ty, which, grid.grids, out)
+    return out
