@@ -781,3 +781,24 @@ def test_log_and_exp_match_numpy():
     special = np.array([-np.inf, -709.0, -1e5, np.nan])
     exp_pass(special, out[:4])
     assert out[0] == 0.0 and out[1] == 0.0 and out[2] == 0.0 and np.isnan(out[3])
+
+
+def test_sorted_uniforms_are_uniform_order_statistics():
+    """Multinomial resampling sorts its M uniforms by drawing their order statistics directly:
+    ascending, in (0, 1], equal to the numpy reference, and distributed as sorted uniforms
+    (the k-th of M has mean k / (M + 1); Kolmogorov-Smirnov on the pooled values, p > 0.001)."""
+    from scipy import stats
+
+    rng = np.random.default_rng([KERNEL_SEED, 56])
+    m, reps = 200, 2000
+    pooled, means = [], np.zeros(m)
+    for _ in range(reps):
+        u = rng.random(m)
+        out = np.empty(m)
+        rs.sorted_uniforms(u, out)
+        np.testing.assert_allclose(out, rs.sorted_uniforms_numpy(u), rtol=1e-14)
+        assert (np.diff(out) >= 0).all() and out[0] > 0 and out[-1] <= 1
+        pooled.append(out)
+        means += out / reps
+    np.testing.assert_allclose(means, np.arange(1, m + 1) / (m + 1), atol=5 * 0.5 / math.sqrt(reps * m))
+    assert stats.kstest(np.concatenate(pooled), "uniform").pvalue > 1e-3
