@@ -720,6 +720,28 @@ def test_sin_cos_matches_numpy():
         assert abs(s1 - math.sin(ref + a)) < 1e-15 and abs(c1 - math.cos(ref + a)) < 1e-15
 
 
+def test_sin_cos_of_wound_angles_is_a_bounded_pseudo_random_direction():
+    """Beyond ``trig.WOUND`` (1e5 rad) the heading of a lost filter can wind up without bound
+    (range-scaled roughening): sin_cos must still give a unit vector, spread evenly over the
+    circle (as the C library's exact reduction of such angles is, for all a filter can tell),
+    and NaN for NaN and infinities, as numpy's. At and below WOUND it is numpy's value."""
+    from tanbench.filters.trig import WOUND
+
+    rng = np.random.default_rng([KERNEL_SEED, 82])
+    d = np.concatenate([rng.uniform(WOUND * 1.0000001, 1e12, 40000), -np.logspace(5.1, 300, 20000)])
+    s, c = np.empty_like(d), np.empty_like(d)
+    trig_pass(d, s, c)
+    assert np.abs(s * s + c * c - 1.0).max() < 1e-15
+    counts = np.histogram(np.arctan2(s, c), bins=12, range=(-math.pi, math.pi))[0]
+    assert counts.min() > 0.9 * d.size / 12 and counts.max() < 1.1 * d.size / 12
+    edge = np.array([WOUND, -WOUND, np.nextafter(WOUND, 0.0)])
+    trig_pass(edge, s[:3], c[:3])
+    assert np.abs(s[:3] - np.sin(edge)).max() < 1e-11 and np.abs(c[:3] - np.cos(edge)).max() < 1e-11
+    bad = np.array([np.nan, np.inf, -np.inf])
+    trig_pass(bad, s[:3], c[:3])
+    assert np.isnan(s[:3]).all() and np.isnan(c[:3]).all()
+
+
 def _trig_pass():
     import numba as nb
 

@@ -1,7 +1,8 @@
 """Sine and cosine for the particle loops, branch free so that the loops vectorise.
 
 ``sin_cos(d)`` reduces d by multiples of pi/2 (Cody-Waite, two-part pi/2: accurate for
-|d| up to about 1e5 rad, far beyond any angle offset here) and evaluates fdlibm's minimax
+|d| up to ``WOUND`` = 1e5 rad, far beyond any angle offset of a working filter; a wound-up
+angle beyond it is replaced by a pseudo-random one, :func:`wound_angle`) and evaluates fdlibm's minimax
 polynomials for sine and cosine on [-pi/4, pi/4] (k_sin.c, k_cos.c); the quadrant is
 applied by selects, not branches. Accurate to about 1 ulp (the tests compare with numpy's
 ``sin`` and ``cos``, its plain-numpy reference). A loop over particles that calls it has
@@ -20,20 +21,45 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters import FASTMATH
+from tanbench.filters.vecmath import float_bits
 
 TWO_OVER_PI = 6.36619772367581382433e-01
 PIO2_HI = 1.57079632673412561417e+00  # the first 33 bits of pi/2
 PIO2_LO = 6.07710050650619224932e-11  # pi/2 - PIO2_HI
 ROUND = 6755399441055744.0  # 1.5 * 2^52: adding and subtracting it rounds to the nearest integer
+WOUND = 1.0e5  # rad: beyond, sin_cos takes the angle as wound (wound_angle)
+HASH_MULTIPLIER = np.int64(-7046029254386353131)  # 0x9E3779B97F4A7C15, 2^64 / golden ratio, as int64
+FRACTION_MASK = np.int64((1 << 53) - 1)
+TURN_PER_2_53 = 2.0 * math.pi / 9007199254740992.0
 S1, S2, S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
 S4, S5, S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
 C1, C2, C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
 C4, C5, C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
 
 
+@nb.njit(cache=True, inline="always")
+def wound_angle(d):
+    """An angle in [-pi, pi) standing for an angle ``d`` wound beyond ``WOUND``: the top 53 bits
+    of d's bits times a 64-bit odd constant (Fibonacci hashing), as a fraction of a turn.
+
+    Such an angle has lost every bit below its units in the last place (ulp(1e5) is 1.5e-11
+    rad, ulp(1e9) 1.2e-7 rad, ulp(1e16) 2 rad): its value modulo 2 pi is no longer a
+    measurement but a function of rounding, as arbitrary as any other. The C library's exact
+    reduction and this hash both give an angle that the rest of the cloud does not predict;
+    this one costs a multiply and keeps the loop vectorised. It only appears in filters that
+    have lost the heading (range-scaled roughening lets the heading spread grow without bound).
+    """
+    h = float_bits(d) * HASH_MULTIPLIER
+    return np.float64((h >> 11) & FRACTION_MASK) * TURN_PER_2_53 - math.pi
+
+
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def sin_cos(d):
-    """(sin d, cos d), branch free; |d| up to about 1e5 rad."""
+    """(sin d, cos d), branch free: to about 1 ulp for |d| <= ``WOUND``; beyond, the sine
+    and cosine of a pseudo-random angle fixed by d's bits (:func:`wound_angle`); NaN for
+    NaN or infinite d."""
+    nonfinite = d - d  # 0, or NaN for NaN and +-inf
+    d = d if abs(d) <= WOUND else wound_angle(d)
     qf = (d * TWO_OVER_PI + ROUND) - ROUND  # the nearest multiple of pi/2
     r = (d - qf * PIO2_HI) - qf * PIO2_LO  # in [-pi/4, pi/4]
     q = np.int32(qf)
@@ -45,7 +71,7 @@ def sin_cos(d):
     cq = s if odd else c
     sq = -sq if (q & 2) != 0 else sq
     cq = -cq if ((q + 1) & 2) != 0 else cq
-    return sq, cq
+    return sq + nonfinite, cq + nonfinite
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
