@@ -52,6 +52,30 @@ def _rows(x, lo, n):
             x[YAW, lo:lo + n], x[BX, lo:lo + n], x[BZ, lo:lo + n])
 
 
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _block_views(x, lo, noise, dist_innov):
+    """The 1-D views a propagation pass works on: the block's state rows (:func:`_rows`), the
+    six noise rows and the two distance-innovation rows."""
+    return (_rows(x, lo, noise.shape[1]), (noise[0], noise[1], noise[2], noise[3], noise[4], noise[5]),
+            (dist_innov[0], dist_innov[1]))
+
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _move_particle(rows, noise, dist, j, de, dn, dup, dpitch, droll, dyaw, sig_up, sig_att, navigation, d0e, d0n):
+    """Particle ``j`` of a block (views from :func:`_block_views`) moves by (de, dn) (noise
+    included), its up, pitch, roll and yaw by their increments plus noise; the distance
+    innovations of ``DIST_NAVIGATION`` go to ``dist``. The two readings of Eq. 1 share it."""
+    rows[0][j] += de
+    rows[1][j] += dn
+    rows[2][j] += dup + sig_up * noise[2][j]
+    rows[3][j] += dpitch + sig_att * noise[3][j]
+    rows[4][j] += droll + sig_att * noise[4][j]
+    rows[5][j] += dyaw + sig_att * noise[5][j]
+    if navigation:
+        dist[0][j] = d0e - de
+        dist[1][j] = d0n - dn
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off=0.0, lo=0):
     """Move particles ``x`` (8, M; a row per state, a column per particle) over one interval.
@@ -76,9 +100,9 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
     dyaw, sx, sz = inc[DYAW], inc[SX], inc[SZ]
     dup, dpitch, droll = inc[DUP], inc[DPITCH], inc[DROLL]
     navigation = dist_mode == DIST_NAVIGATION
-    e, nn, u, pitch, roll, yaw, bxs, bzs = _rows(x, lo, noise.shape[1])
-    n_e, n_n, n_u, n_pitch, n_roll, n_yaw = noise[0], noise[1], noise[2], noise[3], noise[4], noise[5]
-    dist_e, dist_n = dist_innov[0], dist_innov[1]
+    rows, nz, dist = _block_views(x, lo, noise, dist_innov)
+    e, nn, u, pitch, roll, yaw, bxs, bzs = rows
+    n_e, n_n = nz[0], nz[1]
     for j in range(noise.shape[1]):
         bx = bxs[j]
         bz = bzs[j]
@@ -87,15 +111,8 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
         un = d0n + bx * jaxn - bz * jazn
         de = c * ue - s * un + sig_pos * n_e[j]
         dn = s * ue + c * un + sig_pos * n_n[j]
-        e[j] += de
-        nn[j] += dn
-        u[j] += dup + sig_up * n_u[j]
-        pitch[j] += dpitch + sig_att * n_pitch[j]
-        roll[j] += droll + sig_att * n_roll[j]
-        yaw[j] += (dyaw + bx * sx - bz * sz) + sig_att * n_yaw[j]
-        if navigation:
-            dist_e[j] = d0e - de
-            dist_n[j] = d0n - dn
+        _move_particle(rows, nz, dist, j, de, dn, dup, dpitch, droll, dyaw + bx * sx - bz * sz, sig_up,
+                       sig_att, navigation, d0e, d0n)
 
 
 def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode):
@@ -142,23 +159,16 @@ def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_m
     d0e, d0n = inc[D0E], inc[D0N]
     dup, dpitch, droll = inc[DUP], inc[DPITCH], inc[DROLL]
     navigation = dist_mode == DIST_NAVIGATION
-    e, nn, u, pitch, roll, yaw, bxs, bzs = _rows(x, lo, noise.shape[1])
-    n_e, n_n, n_u, n_pitch, n_roll, n_yaw = noise[0], noise[1], noise[2], noise[3], noise[4], noise[5]
-    dist_e, dist_n = dist_innov[0], dist_innov[1]
+    rows, nz, dist = _block_views(x, lo, noise, dist_innov)
+    e, nn, u, pitch, roll, yaw, bxs, bzs = rows
+    n_e, n_n = nz[0], nz[1]
     for j in range(noise.shape[1]):
         st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att0)
         de = (cg * cp - st * sg * sp) * vx - ct * sp * vy + sig_pos * n_e[j]
         dn = (cg * sp + st * sg * cp) * vx + ct * cp * vy + sig_pos * n_n[j]
         yaw_rate = (-sg * (wx - bxs[j]) + cg * (wz - bzs[j])) / ct
-        e[j] += de
-        nn[j] += dn
-        u[j] += dup + sig_up * n_u[j]
-        pitch[j] += dpitch + sig_att * n_pitch[j]
-        roll[j] += droll + sig_att * n_roll[j]
-        yaw[j] += yaw_rate * dt + sig_att * n_yaw[j]
-        if navigation:
-            dist_e[j] = d0e - de
-            dist_n[j] = d0n - dn
+        _move_particle(rows, nz, dist, j, de, dn, dup, dpitch, droll, yaw_rate * dt, sig_up, sig_att,
+                       navigation, d0e, d0n)
 
 
 def propagate_tight_euler_numpy(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode):

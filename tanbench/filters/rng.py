@@ -111,9 +111,8 @@ def _rotl(x, k):
 
 
 @nb.njit(cache=True, inline="always")
-def next_u64(s):
-    """One xoshiro256++ step on state ``s`` (uint64[4], updated in place); the output word."""
-    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
+def _xoshiro_step(s0, s1, s2, s3):
+    """xoshiro256++ on the state words (s0, s1, s2, s3): (output word, the next four words)."""
     result = _rotl(s0 + s3, 23) + s0
     t = s1 << np.uint64(17)
     s2 ^= s0
@@ -121,8 +120,13 @@ def next_u64(s):
     s1 ^= s2
     s0 ^= s3
     s2 ^= t
-    s3 = _rotl(s3, 45)
-    s[0], s[1], s[2], s[3] = s0, s1, s2, s3
+    return result, s0, s1, s2, _rotl(s3, 45)
+
+
+@nb.njit(cache=True, inline="always")
+def next_u64(s):
+    """One xoshiro256++ step on state ``s`` (uint64[4], updated in place); the output word."""
+    result, s[0], s[1], s[2], s[3] = _xoshiro_step(s[0], s[1], s[2], s[3])
     return result
 
 
@@ -146,21 +150,8 @@ def lane_words(words, out):
     for r in range(out.shape[0] // LANES):
         base = r * LANES
         for lane in range(LANES):
-            s0 = words[lane]
-            s1 = words[LANES + lane]
-            s2 = words[2 * LANES + lane]
-            s3 = words[3 * LANES + lane]
-            out[base + lane] = _rotl(s0 + s3, 23) + s0
-            t = s1 << np.uint64(17)
-            s2 ^= s0
-            s3 ^= s1
-            s1 ^= s2
-            s0 ^= s3
-            s2 ^= t
-            words[lane] = s0
-            words[LANES + lane] = s1
-            words[2 * LANES + lane] = s2
-            words[3 * LANES + lane] = _rotl(s3, 45)
+            out[base + lane], words[lane], words[LANES + lane], words[2 * LANES + lane], words[3 * LANES + lane] = \
+                _xoshiro_step(words[lane], words[LANES + lane], words[2 * LANES + lane], words[3 * LANES + lane])
 
 
 @nb.njit(cache=True)
