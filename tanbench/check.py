@@ -1,8 +1,10 @@
 """Regression check of error statistics: is NEW worse than BASELINE, cell by cell?
 
 Cells are matched by their scenario (every scenario column the two results share, so
-results from another tanbench version match as long as the schema does); cells found in
-only one directory are reported. For each matched (cell, method) and metric (final and
+results from another tanbench version match as long as the schema does; ``ignore`` names
+scenario columns left out of the match, to compare cells that differ only there, e.g. the
+two random streams of ``filter.random_numbers``); cells found in only one directory are
+reported. For each matched (cell, method) and metric (final and
 time-averaged horizontal error):
 
 * the change in the mean with a bootstrap 95 % confidence interval (runs resampled
@@ -54,6 +56,7 @@ class CheckOptions:
     seed: int = 0
     nees: bool = False
     nees_margin_abs: float = 0.05
+    ignore: tuple[str, ...] = ()  # scenario columns left out of the cell match
 
 
 @dataclass
@@ -153,6 +156,11 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResu
     new, base = _load(new_dir, opt.nees), _load(base_dir, opt.nees)
     metrics = {**METRICS, **(dict([NEES_METRIC]) if opt.nees else {})}
     cols = _scenario_columns(new, base)
+    unknown = sorted(set(opt.ignore) - set(cols))
+    if unknown:
+        raise TanbenchError(f"--ignore {', '.join(unknown)}: not a scenario column of both directories "
+                            f"(scenario columns are named as in the sweep file, e.g. filter.random_numbers)")
+    cols = [c for c in cols if c not in opt.ignore]
     if not cols:
         raise TanbenchError(f"{new_dir} and {base_dir} share no scenario columns; not comparable")
     new = new.assign(_cell=_cell_keys(new, cols))

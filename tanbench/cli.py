@@ -422,11 +422,14 @@ def check(
                               "NEES lies outside its 95 % chi-square bounds."),
     nees_margin: float = typer.Option(0.05, "--nees-margin", min=0.0, max=1.0,
                                       help="Absolute margin of the NEES metric (a fraction of updates)."),
+    ignore: Optional[list[str]] = typer.Option(
+        None, "--ignore", help="A scenario column left out of the cell match (repeat for several): compares cells "
+                               "that differ only there, e.g. --ignore filter.random_numbers."),
 ):
     from tanbench.check import CheckOptions, compare, render, write_report
 
     result = compare(new, baseline, CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha,
-                                                 nees=nees, nees_margin_abs=nees_margin))
+                                                 nees=nees, nees_margin_abs=nees_margin, ignore=tuple(ignore or ())))
     typer.echo(render(result))
     if report is not None:
         write_report(result, report)

@@ -156,3 +156,22 @@ def test_incompatible_schema_is_one_clear_error(copy_of_baseline, capsys, monkey
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert "schema" in err and err.count("\n") == 1
+
+
+def test_ignore_matches_cells_that_differ_only_there(copy_of_baseline):
+    """Cells that differ only in an ignored scenario column are compared (the two random streams of
+    ``filter.random_numbers``); without --ignore they are not; an unknown column is one clear error."""
+    from tanbench.errors import TanbenchError
+
+    def other_stream(df, cell):
+        df["filter.random_numbers"] = "numpy" if (df["filter.random_numbers"] == "fast").all() else "fast"
+        return df
+
+    _rewrite_runs(copy_of_baseline, other_stream)
+    with pytest.raises(TanbenchError, match="no cell and method in common"):
+        compare(copy_of_baseline, BASELINE)
+    result = compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("filter.random_numbers",)))
+    assert not result.missing and not result.regressed
+    assert (result.table["verdict"] == "unchanged").all() and len(result.table) == 18
+    with pytest.raises(TanbenchError, match="--ignore filter.no_such_option: not a scenario column"):
+        compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("filter.no_such_option",)))
