@@ -27,6 +27,10 @@ METHODS = builtin_names()
 pytestmark = pytest.mark.slow
 
 RUNS = 16
+# the particle-count comparison (test c) runs 64: at 16 its "2000 better over the run" test was
+# not stable (before issue 17's streams p = 0.007; after, p = 0.17 with the fast lanes and 0.13
+# with numpy's stream; with 64 runs p < 1e-4 with either). Statistic and threshold unchanged.
+RUNS_OF = {"tight-dvl-500": 64, "tight-dvl-2000": 64}
 CONFIGS = {
     "tight-dvl": ({"particles": 1000}, "tight-dvl"),
     # the loose filter as Zhou et al.'s comparison describes it: fixes only, no heading correction
@@ -67,7 +71,7 @@ def monte_carlo():
             overrides, method = CONFIGS[name]
             sc = Scenario(**overrides)
             rows = []
-            for run in range(RUNS):
+            for run in range(RUNS_OF.get(name, RUNS)):
                 vehicle = simulate_vehicle(sc, vehicle_seed(run))  # cheap: the truth is cached per world
                 rows.append(summarise(run_method(sc, method, vehicle, filter_seed(run, METHODS.index(method)))))
             cache[name] = {k: np.array([r[k] for r in rows]) for k in rows[0]}
@@ -115,10 +119,13 @@ def test_tight_recovers_heading(monte_carlo):
 
 
 def test_more_particles_do_not_hurt(monte_carlo):
-    """(c) 2000 particles versus 500 on the same vehicle data. The final error with 2000 is not
-    significantly larger (one-sided Wilcoxon "2000 worse" must not reject at 5 %; observed
-    p ~0.49, means ~3.5 m both), and the error averaged over the run is smaller with 2000
-    (observed means 1.9 m vs 6.2 m: fewer early false fixes; "2000 better" p ~0.007)."""
+    """(c) 2000 particles versus 500 on the same vehicle data, 64 runs (``RUNS_OF``). The final
+    error with 2000 is not significantly larger (one-sided Wilcoxon "2000 worse" must not
+    reject at 5 %), and the error averaged over the run is smaller with 2000 (fewer early
+    false fixes; "2000 better" must reject at 5 %). Set on 16 runs (observed then: final
+    p ~0.49, means ~3.5 m both; over the run 1.9 m vs 6.2 m, p ~0.007); with issue 17's
+    streams the 16-run version failed its last assertion (p = 0.17) and 64 runs give means
+    1.6 vs 3.0 m over the run, p < 1e-4."""
     few, many = monte_carlo("tight-dvl-500"), monte_carlo("tight-dvl-2000")
     assert wilcoxon(many["final_error"], few["final_error"], alternative="greater").pvalue > 0.05
     assert many["final_error"].mean() <= 1.25 * few["final_error"].mean() + 0.5
