@@ -9,8 +9,9 @@ methods that assemble them into TAN filters are in :mod:`tanbench.methods`.
 # without "reassoc" and "contract": with them LLVM re-associates sums and fuses a*b + c*d
 # into an FMA on one product or the other depending on where the operands sit in the
 # compiled code, so the same formula gave other last bits once a kernel was restructured or
-# inlined elsewhere (the filter loops' fused passes, docs/speed.md). Without them a kernel's
-# numbers follow from its source expressions, and the fused passes equal the array kernels
-# bit for bit (tests/test_fused_passes.py). Dropping FMA contraction cost the tight loop about
-# 5-8 % (docs/speed.md); re-associated sums cost nothing measurable.
+# inlined elsewhere. Without them a kernel's numbers follow from its source expressions:
+# the particle passes run block by block equal the kernels run on the whole cloud, bit for
+# bit (tests/test_particle_passes.py),
+# and sums that should vectorise are written over four accumulators in a fixed order
+# (resample.sum4), which gives the same bits whatever the SIMD width (docs/speed.md).
 FASTMATH = {"arcp", "nsz", "afn"}

@@ -37,7 +37,7 @@ SERIES_MODES = ("none", "summary", "full")
 # them by the share of a core each process gets at the current load average.
 # (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
 SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
-COMPILE_S = 12.0  # numba compiling every kernel (cold on-disk cache), one process
+COMPILE_S = 127.0  # numba compiling every kernel (cold on-disk cache), one idle core of the 2-core dev machine (2 Dec 2026)
 WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
 FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
 
