@@ -265,33 +265,47 @@ def test_start_at_truth_stays(method):
 # settings are the defaults
 PAPER_READING = dict(map_aware_likelihood=False, likelihood="gaussian", loose_architecture="fix-only",
                      keep_on_map=False, divergence_spread_m=None)
-# runs per noise level. First written with 6; the recommended tight-sbe and loose-dvl then failed
-# and were marked as expected failures. Measured on 48 runs with the code before the vectorised
-# passes and with it, blocks of 6 runs passed or failed by luck (a few lost runs decide a
-# 6-run mean: each code gave 2 or 3 failing blocks of 8 for each of the two methods), while the
-# 48 runs pass for both, with both codes.
-# The statistic and the threshold are the original ones.
+# runs per noise level. The test was set with 6 runs (ORIGINAL_RUNS); that version is kept and
+# counted: before issue 17 the recommended tight-sbe and loose-dvl failed it (expected failures
+# then); on the vectorised code every method passes it. A few lost runs decide a 6-run mean, so
+# the same statistic and threshold are also reported on 48 runs (NOISE_FREE_RUNS; their first 6
+# are the original runs), which pass for every method, with the code before the vectorised
+# passes and with it.
+ORIGINAL_RUNS = 6
 NOISE_FREE_RUNS = 48
+_NOISE_FREE_ERRORS: dict = {}
 
 
-@pytest.mark.parametrize("settings, method", [(s, m) for s in ("paper", "recommended") for m in METHODS])
-def test_zero_range_noise_no_worse(settings, method):
+def _noise_free_errors(settings, method):
+    """Final horizontal errors over NOISE_FREE_RUNS paired runs at noise 0 and 1 m, computed once."""
+    key = (settings, method)
+    if key not in _NOISE_FREE_ERRORS:
+        f = PAPER_READING if settings == "paper" else {}
+        noisy, clean = short_scenario(noise_m=1.0, filter=f), short_scenario(noise_m=0.0, filter=f)
+        assert noisy.world_key() == clean.world_key()
+        errs = {0.0: [], 1.0: []}
+        for k in range(NOISE_FREE_RUNS):
+            for sc in (noisy, clean):
+                v = simulate_vehicle(sc, vseed(k))
+                r = run_method(sc, method, v, fseed(k, method))
+                check_finite(r, method)
+                errs[sc.noise_m].append(r.metrics["final_horizontal_error_m"])
+        v0 = simulate_vehicle(clean, vseed(0))
+        v1 = simulate_vehicle(noisy, vseed(0))
+        assert not np.array_equal(v0.obs.dvl_ranges, v1.obs.dvl_ranges)
+        _NOISE_FREE_ERRORS[key] = {n: np.array(e) for n, e in errs.items()}
+    return _NOISE_FREE_ERRORS[key]
+
+
+@pytest.mark.parametrize("settings, method, runs", [
+    pytest.param(s, m, n, id=f"{s}-{m}-{n}runs") for n in (ORIGINAL_RUNS, NOISE_FREE_RUNS)
+    for s in ("paper", "recommended") for m in METHODS])
+def test_zero_range_noise_no_worse(settings, method, runs):
     """noise_m = 0 runs (no zero-variance trouble) and is not worse than 1 m noise on the same
-    vehicle runs (common random numbers: noise_m is not part of the world)."""
-    f = PAPER_READING if settings == "paper" else {}
-    noisy, clean = short_scenario(noise_m=1.0, filter=f), short_scenario(noise_m=0.0, filter=f)
-    assert noisy.world_key() == clean.world_key()
-    errs = {0.0: [], 1.0: []}
-    for k in range(NOISE_FREE_RUNS):
-        for sc in (noisy, clean):
-            v = simulate_vehicle(sc, vseed(k))
-            r = run_method(sc, method, v, fseed(k, method))
-            check_finite(r, method)
-            errs[sc.noise_m].append(r.metrics["final_horizontal_error_m"])
-    v0 = simulate_vehicle(clean, vseed(0))
-    v1 = simulate_vehicle(noisy, vseed(0))
-    assert not np.array_equal(v0.obs.dvl_ranges, v1.obs.dvl_ranges)
-    assert np.mean(errs[0.0]) <= 1.25 * np.mean(errs[1.0]) + 1.0, errs
+    vehicle runs (common random numbers: noise_m is not part of the world), over the first
+    ``runs`` runs."""
+    errs = _noise_free_errors(settings, method)
+    assert np.mean(errs[0.0][:runs]) <= 1.25 * np.mean(errs[1.0][:runs]) + 1.0, errs
 
 
 @pytest.mark.parametrize("method", METHODS)

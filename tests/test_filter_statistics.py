@@ -27,9 +27,8 @@ METHODS = builtin_names()
 pytestmark = pytest.mark.slow
 
 RUNS = 16
-# the particle-count comparison (test c) runs 64: at 16 its "2000 better over the run" test was
-# not stable (before issue 17's streams p = 0.007; after, p = 0.17 with the fast lanes and 0.13
-# with numpy's stream; with 64 runs p < 1e-4 with either). Statistic and threshold unchanged.
+# the particle-count comparison (test c) also runs 64: its original 16-run version is kept and
+# counted, and the same statistic is reported on 64 runs (the first 16 are the original runs)
 RUNS_OF = {"tight-dvl-500": 64, "tight-dvl-2000": 64}
 CONFIGS = {
     "tight-dvl": ({"particles": 1000}, "tight-dvl"),
@@ -118,15 +117,22 @@ def test_tight_recovers_heading(monte_carlo):
     assert (h < 30.0).mean() >= 0.9
 
 
-def test_more_particles_do_not_hurt(monte_carlo):
-    """(c) 2000 particles versus 500 on the same vehicle data, 64 runs (``RUNS_OF``). The final
-    error with 2000 is not significantly larger (one-sided Wilcoxon "2000 worse" must not
-    reject at 5 %), and the error averaged over the run is smaller with 2000 (fewer early
-    false fixes; "2000 better" must reject at 5 %). Set on 16 runs (observed then: final
-    p ~0.49, means ~3.5 m both; over the run 1.9 m vs 6.2 m, p ~0.007); with issue 17's
-    streams the 16-run version failed its last assertion (p = 0.17) and 64 runs give means
-    1.6 vs 3.0 m over the run, p < 1e-4."""
-    few, many = monte_carlo("tight-dvl-500"), monte_carlo("tight-dvl-2000")
+@pytest.mark.parametrize("runs", [
+    pytest.param(RUNS, id="original-16runs", marks=pytest.mark.xfail(strict=True, reason=(
+        "the original 16-run version fails on the vectorised code (issue 17): over the run 2000 particles "
+        "2.13 m vs 500 particles 2.47 m, '2000 better' p = 0.17 (0.13 with numpy's stream; 0.007 before "
+        "issue 17); on 64 runs 1.64 vs 2.98 m, p < 1e-4"))),
+    pytest.param(RUNS_OF["tight-dvl-2000"], id="64runs")])
+def test_more_particles_do_not_hurt(monte_carlo, runs):
+    """(c) 2000 particles versus 500 on the same vehicle data. The final error with 2000 is not
+    significantly larger (one-sided Wilcoxon "2000 worse" must not reject at 5 %), and the
+    error averaged over the run is smaller with 2000 (fewer early false fixes; "2000 better"
+    must reject at 5 %). Set on 16 runs (observed then: final p ~0.49, means ~3.5 m both; over
+    the run 1.9 m vs 6.2 m, p ~0.007); that version is kept and counted. The same statistic
+    and thresholds are also reported over 64 runs (``RUNS_OF``; the first 16 are the
+    original runs)."""
+    few = {k: v[:runs] for k, v in monte_carlo("tight-dvl-500").items()}
+    many = {k: v[:runs] for k, v in monte_carlo("tight-dvl-2000").items()}
     assert wilcoxon(many["final_error"], few["final_error"], alternative="greater").pvalue > 0.05
     assert many["final_error"].mean() <= 1.25 * few["final_error"].mean() + 0.5
     assert wilcoxon(many["mean_error"], few["mean_error"], alternative="greater").pvalue > 0.05
