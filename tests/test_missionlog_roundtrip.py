@@ -120,7 +120,7 @@ def test_without_a_reference_track_the_estimates_are_the_same_and_nothing_is_sco
     unscored = replay(log, out=mission / "unscored", **args)
     assert scored.has_reference and not unscored.has_reference
     pd.testing.assert_frame_equal(pd.read_parquet(mission / "scored" / "estimates.parquet"),
-                                  pd.read_parquet(mission / "unscored" / "estimates.parquet"))
+                                  pd.read_parquet(mission / "unscored" / "estimates.parquet"), check_exact=True)
     runs = pd.read_parquet(mission / "unscored" / "runs.parquet")
     assert "final_horizontal_error_m" not in runs.columns and (runs["status"] == "ok").all()
     assert not (mission / "unscored" / "series.parquet").exists()

@@ -18,7 +18,8 @@ import pandas as pd
 
 from tanbench.errors import TanbenchError
 from tanbench.missions.spec import (ACCEL, ANGLE_UNITS, ATTITUDE, GYRO, LOCAL, LONLAT, META_FILE, RATE_UNITS,
-                                    SUFFIXES, TABLES, TIME, VELOCITY, LogMeta, range_columns, to_rfu)
+                                    SUFFIXES, TABLES, TIME, VELOCITY, LogMeta, parse_yaml_model, range_columns,
+                                    to_rfu)
 
 
 @dataclass
@@ -57,11 +58,6 @@ class MissionLog:
 
 def read_log(directory) -> MissionLog:
     """Read and check the mission log in ``directory``."""
-    import yaml
-    from pydantic import ValidationError
-
-    from tanbench.runner.sweep import UniqueKeyLoader, format_validation_error
-
     directory = Path(directory)
     if not directory.is_dir():
         raise TanbenchError(f"{directory}: no such mission-log directory")
@@ -69,15 +65,10 @@ def read_log(directory) -> MissionLog:
     if not meta_path.is_file():
         raise TanbenchError(f"{directory}: not a mission log (no {META_FILE}; docs/missions.md describes the format)")
     try:
-        data = yaml.load(meta_path.read_text(), Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise TanbenchError(f"{meta_path}: malformed YAML ({str(exc).splitlines()[0]})") from None
-    if not isinstance(data, dict):
-        raise TanbenchError(f"{meta_path}: must be a mapping of keys (format, format_version, sensors, ...)")
-    try:
-        meta = LogMeta(**data)
-    except ValidationError as exc:
-        raise TanbenchError(f"{meta_path}: {format_validation_error(exc)}") from None
+        text = meta_path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TanbenchError(f"{meta_path}: cannot read it ({type(exc).__name__})") from None
+    meta = parse_yaml_model(text, str(meta_path), LogMeta, "format, format_version, sensors, ...")
     tables, files = {}, [meta_path]
     for name, required in TABLES.items():
         path = _table_file(directory, name, required)

@@ -80,30 +80,18 @@ def method_seed(seed: int, method: str) -> np.random.SeedSequence:
 
 def load_settings(path: Path | None) -> tuple[ReplaySettings, str]:
     """The settings file (and its text); no file: every default."""
-    import yaml
-
-    from tanbench.runner.sweep import UniqueKeyLoader, format_validation_error
+    from tanbench.missions.spec import parse_yaml_model
 
     if path is None:
         return ReplaySettings(), ""
     try:
         text = Path(path).read_text()
-        data = yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except FileNotFoundError:
         raise TanbenchError(f"{path}: no such settings file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise TanbenchError(f"{path}: cannot read the settings file ({type(exc).__name__})") from None
-    except yaml.YAMLError as exc:
-        raise TanbenchError(f"{path}: malformed YAML ({str(exc).splitlines()[0]})") from None
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise TanbenchError(f"{path}: a settings file is a mapping (profile, particles, sampling_time_s, filter, "
-                            f"method_options, map)")
-    try:
-        settings = ReplaySettings(**data)
-    except ValidationError as exc:
-        raise TanbenchError(f"{path}: {format_validation_error(exc)}") from None
+    settings = parse_yaml_model(text, str(path), ReplaySettings,
+                                "profile, particles, sampling_time_s, filter, method_options, map")
     unknown = sorted(set(settings.map) - set(MAP_KEYS))
     if unknown:
         raise TanbenchError(f"{path}: map.{unknown[0]}: unknown key (known: {', '.join(MAP_KEYS)})")
@@ -228,7 +216,7 @@ def _run_one(scenario, name, run: LoggedRun, nmap, seed, log, bounds):
 
     fseed = method_seed(seed, name)
     settings = {k: v for k, v in flatten(scenario.normalized()).items() if k.split(".")[0] not in NOT_IN_REPLAY}
-    row = {"sweep": "replay", "tables": "", "method": name, "run": 0, "seed": seed_number(np.random.SeedSequence(seed)),
+    row = {"sweep": "replay", "tables": "", "method": name, "run": 0, "seed": seed,
            "filter_seed": seed_number(fseed), **settings, "log": str(log.path)}
     started = time.perf_counter()
     try:

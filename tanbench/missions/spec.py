@@ -19,9 +19,10 @@ import math
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 
-from tanbench.config import SensorSpec, plain_number_check
+from tanbench.config import SensorSpec, _Strict
+from tanbench.errors import TanbenchError
 
 FORMAT_NAME = "tanbench-mission-log"
 FORMAT_VERSION = 1
@@ -51,16 +52,28 @@ def range_columns(beams: int, prefix: str = "") -> list[str]:
     return [f"{prefix}range_{i}_m" for i in range(1, beams + 1)]
 
 
-class _LogModel(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+def parse_yaml_model(text: str, label: str, model: type[BaseModel], keys: str):
+    """YAML ``text`` validated as ``model``; any problem is one TanbenchError line naming ``label``
+    (``keys``: the top-level keys, for the message when the text is not a mapping)."""
+    import yaml
+    from pydantic import ValidationError
 
-    @field_validator("*", mode="before")
-    @classmethod
-    def _plain_numbers(cls, value, info: ValidationInfo):
-        return plain_number_check(cls, value, info.field_name)
+    from tanbench.runner.sweep import UniqueKeyLoader, format_validation_error
+
+    try:
+        data = yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        raise TanbenchError(f"{label}: malformed YAML ({str(exc).splitlines()[0]})") from None
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise TanbenchError(f"{label}: must be a mapping of keys ({keys})")
+    try:
+        return model(**data)
+    except ValidationError as exc:
+        raise TanbenchError(f"{label}: {format_validation_error(exc)}") from None
 
 
-class BeamGeometry(_LogModel):
+class BeamGeometry(_Strict):
     """Body-frame directions of a sonar's beams, in exactly one of three forms."""
 
     vectors: tuple[tuple[float, float, float], ...] | None = Field(
@@ -105,7 +118,7 @@ class BeamGeometry(_LogModel):
         return len(self.vectors or self.azimuths_deg or self.across_track_deg)
 
 
-class LogMeta(_LogModel):
+class LogMeta(_Strict):
     """``mission.yaml``: what the tables cannot say (docs/missions.md, "Metadata")."""
 
     format: Literal["tanbench-mission-log"]
