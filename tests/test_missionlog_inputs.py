@@ -110,6 +110,13 @@ def _remove(name):
     return lambda log_dir: (log_dir / name).unlink()
 
 
+def _both(*setups):
+    def setup(log_dir):
+        for one in setups:
+            one(log_dir)
+    return setup
+
+
 def _set(d, dotted, value):
     *parts, last = dotted.split(".")
     for p in parts:
@@ -134,6 +141,11 @@ LOG_CASES = [
      "column 'depth_m' is not numeric"),
     ("times going back", _edit_table("dvl", lambda df: df.iloc[::-1]), {}, "t_s must be finite and strictly increasing"),
     ("an irregular IMU", _edit_table("imu", lambda df: df.drop(index=500)), {}, "imu samples 499 and 500 are 0.02 s apart"),
+    ("an IMU rate that is not the table's", _edit_meta(_with("sensors.imu_rate_hz", 100.5)), {},
+     "the imu samples come every 0.01 s on average, not every 1 / sensors.imu_rate_hz = 0.00995025 s"),
+    ("a reference in another coordinate system",
+     _edit_table("reference", lambda df: df.rename(columns={"east_m": "lon_deg", "north_m": "lat_deg"})), {},
+     "the reference track's positions are in lon/lat but the navigation solution's are not"),
     ("another format version", _edit_meta(_with("format_version", 2)), {}, "reads mission-log version 1, not 2"),
     ("an unknown metadata key", _edit_meta(_with("sensors.sonar_rate", 1.0)), {}, "sensors.sonar_rate: unknown key"),
     ("beams that do not match the table", _edit_meta(_with("sensors.beam_azimuths_deg", [0.0, 120.0, 240.0])), {},
@@ -147,7 +159,8 @@ LOG_CASES = [
     ("a log off the map", _edit_table("navigation", lambda df: df.assign(east_m=df["east_m"] + 1e5)), {},
      "the initial uncertainty (filter.initial_area_m / 2 = 75 m around it) leaves the map"),
     ("a lon/lat log on a map in metres",
-     _edit_table("navigation", lambda df: df.rename(columns={"east_m": "lon_deg", "north_m": "lat_deg"})), {},
+     _both(_remove("reference.parquet"),
+           _edit_table("navigation", lambda df: df.rename(columns={"east_m": "lon_deg", "north_m": "lat_deg"}))), {},
      "positions are lon/lat but the map"),
     ("an unknown method", None, {"methods": ["tight-dvl,kalman-magic"]}, "unknown method 'kalman-magic'"),
     ("no map", None, {"map_path": None}, "no map: give --map FILE"),

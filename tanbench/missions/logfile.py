@@ -78,6 +78,11 @@ def read_log(directory) -> MissionLog:
         tables[name] = _canonical(name, _read_frame(path), path, meta)
     log = MissionLog(meta=meta, tables=tables, path=directory, files=files)
     _check_beam_blocks(log)
+    ref = tables.get("reference")
+    if ref is not None and (LONLAT[0] in ref.columns) != log.lonlat:
+        raise TanbenchError(f"{directory}: the reference track's positions are in "
+                            f"{'lon/lat' if not log.lonlat else 'metres'} but the navigation solution's are not; "
+                            f"give both in one system")
     return log
 
 

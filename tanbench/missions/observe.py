@@ -101,6 +101,10 @@ def _check_regular(log: MissionLog, t: np.ndarray, dt: float) -> None:
     if t.size < 2:
         raise TanbenchError(f"{log.path}: the imu table needs at least two samples")
     steps = np.diff(t)
+    mean = (t[-1] - t[0]) / (t.size - 1)
+    if abs(mean - dt) > 1e-3 * dt:
+        raise TanbenchError(f"{log.path}: the imu samples come every {mean:.6g} s on average, not every 1 / "
+                            f"sensors.imu_rate_hz = {dt:.6g} s: give the IMU's rate")
     bad = np.abs(steps - dt) > IMU_JITTER * dt
     if bad.any():
         k = int(np.argmax(bad))
@@ -133,10 +137,11 @@ def at_samples(log: MissionLog, table: str, t: np.ndarray, within: np.ndarray | 
 
 def nearest_samples(log: MissionLog, table: str, times: np.ndarray, t: np.ndarray, dt: float) -> np.ndarray:
     """The IMU sample index nearest each of ``times`` (at most half a sample away, within the IMU's span)."""
-    idx = np.rint((times - t[0]) / dt).astype(np.int64)
-    if idx[0] < 0 or idx[-1] >= t.size:
+    if times[0] < t[0] - 0.5 * dt or times[-1] > t[-1] + 0.5 * dt:
         raise TanbenchError(f"{log.path}: {table} pings run t = {times[0]:.6g}..{times[-1]:.6g} s, outside the imu "
                             f"samples' {t[0]:.6g}..{t[-1]:.6g} s")
+    after = np.clip(np.searchsorted(t, times), 1, t.size - 1)
+    idx = np.where(times - t[after - 1] <= t[after] - times, after - 1, after).astype(np.int64)
     off = np.abs(t[idx] - times)
     if (off > 0.5 * dt * (1 + IMU_JITTER)).any():
         k = int(np.argmax(off))
