@@ -286,6 +286,10 @@ def simulate(
         motion_plan(scenario)
     except TanbenchError as exc:  # a duration longer than the trajectory
         raise TanbenchError(f"--duration: {exc}") from None
+    if lonlat:
+        from tanbench.missions.simulated import lonlat_frame
+
+        lonlat_frame(scenario)  # refuses a terrain without geographic georeferencing, before simulating
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(seed))
     df = vehicle_frame(vehicle, every)
     err = np.hypot(df["nav_e"] - df["truth_e"], df["nav_n"] - df["truth_n"])

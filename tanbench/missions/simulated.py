@@ -33,7 +33,7 @@ def simulated_log(scenario, vehicle, seed: int, lonlat: bool = False) -> Mission
 
     obs, truth = vehicle.obs, vehicle.truth
     _, ping_idx, dvl_true, sbe_true = noise_free_world(json.dumps(scenario.world_spec(), sort_keys=True))
-    frame = _lonlat_frame(scenario) if lonlat else None
+    frame = lonlat_frame(scenario) if lonlat else None
     pings = obs.t[obs.ping_idx]
     meta = LogMeta(
         format=FORMAT_NAME, format_version=FORMAT_VERSION, body_frame="rfu",
@@ -69,7 +69,7 @@ def _track(t, pos, pitch, roll, yaw, frame) -> pd.DataFrame:
                          "heading_rad": -np.asarray(yaw)})
 
 
-def _lonlat_frame(scenario):
+def lonlat_frame(scenario):
     """The georeferenced map whose frame the run's positions are in (for lon/lat positions)."""
     from tanbench.terrain import truth_map
 
