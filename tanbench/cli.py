@@ -233,14 +233,22 @@ def tables(
         typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
 
 
-@app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet or CSV."
+@app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet or CSV, or as a "
+             "mission log that `tanbench replay` reads (docs/missions.md)."
              + EXAMPLE.format("tanbench simulate --area A --seed 1 --out run.parquet"))
 def simulate(
-    area: str = typer.Option("A", "--area", help="A, B or vehicle."),
+    area: Optional[str] = typer.Option(None, "--area", help="A, B or vehicle [default: A]."),
     seed: int = typer.Option(1, "--seed", min=0, help="Seed of the run's vehicle data (0 or more)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="File to write: .parquet or .csv."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Seconds [default: the whole run]."),
-    every: int = typer.Option(1, "--every", min=1, help="Keep every n-th IMU sample."),
+    every: int = typer.Option(1, "--every", min=1, help="Keep every n-th IMU sample (--out only)."),
+    sweep_file: Optional[Path] = typer.Option(None, "--sweep", help="Simulate the first cell of this sweep's "
+                                              "scenario instead of an --area."),
+    log: Optional[Path] = typer.Option(None, "--log", help="Also write the run as a mission log into this directory, "
+                                       "with its navigation map (map.npz) and method settings (settings.yaml)."),
+    lonlat: bool = typer.Option(False, "--lonlat", help="The mission log's positions in WGS84 lon/lat (the terrain "
+                                "must be georeferenced)."),
+    log_format: str = typer.Option("parquet", "--log-format", help="The mission log's tables: parquet or csv."),
 ):
     import math
 
@@ -251,27 +259,46 @@ def simulate(
     from tanbench.runner.sweep import format_validation_error
     from tanbench.simulation import motion_plan, simulate_vehicle, vehicle_frame
 
-    if area not in ("A", "B", "vehicle"):
+    if area is not None and area not in ("A", "B", "vehicle"):
         raise TanbenchError(f"--area must be A, B or vehicle, not {area!r}")
+    if area is not None and sweep_file is not None:
+        raise TanbenchError("give --area or --sweep, not both")
     if duration is not None and not (math.isfinite(duration) and duration > 0):
         raise TanbenchError(f"--duration must be a positive number of seconds, not {duration:g}")
     if out is not None and out.suffix.lower() not in (".parquet", ".csv"):
         raise TanbenchError(f"--out {out}: use a .parquet or .csv file name")
+    if log_format not in ("parquet", "csv"):
+        raise TanbenchError(f"--log-format must be parquet or csv, not {log_format!r}")
+    if lonlat and log is None:
+        raise TanbenchError("--lonlat applies to the mission log: give --log DIR")
+    if sweep_file is not None:
+        from tanbench.runner.sweep import load_sweep
+
+        base = load_sweep(sweep_file).cells[0].scenario.normalized()
+        label = f"{sweep_file}"
+    else:
+        base, label = {"area": area or "A"}, f"area {area or 'A'}"
     try:
-        scenario = Scenario(area=area, duration_s=duration)
+        scenario = Scenario(**{**base, "duration_s": duration if duration is not None else base.get("duration_s")})
     except ValidationError as exc:
         raise TanbenchError(f"--duration: {format_validation_error(exc)}") from None
     try:
         motion_plan(scenario)
     except TanbenchError as exc:  # a duration longer than the trajectory
         raise TanbenchError(f"--duration: {exc}") from None
+    if lonlat:
+        from tanbench.missions.simulated import lonlat_frame
+
+        lonlat_frame(scenario)  # refuses a terrain without geographic georeferencing, before simulating
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(seed))
     df = vehicle_frame(vehicle, every)
     err = np.hypot(df["nav_e"] - df["truth_e"], df["nav_n"] - df["truth_n"])
-    typer.echo(f"area {area}, seed {seed}: {df['t'].iloc[-1]:.0f} s, {len(vehicle.obs.ping_idx)} sonar pings; "
+    typer.echo(f"{label}, seed {seed}: {df['t'].iloc[-1]:.0f} s, {len(vehicle.obs.ping_idx)} sonar pings; "
                f"navigation system final horizontal error {err.iloc[-1]:.1f} m (max {err.max():.1f} m), "
                f"heading error {vehicle.initial_heading_error_deg:+.0f} deg at start, "
                f"{(df['nav_heading_deg'] - df['truth_heading_deg'] + 180).mod(360).iloc[-1] - 180:+.1f} deg at end")
+    if log is not None:
+        _write_mission_log(scenario, vehicle, seed, log, lonlat, log_format)
     if out is not None:
         from tanbench import store
 
@@ -284,6 +311,61 @@ def simulate(
         except OSError as exc:
             raise TanbenchError(f"cannot write {out}: {exc.strerror or exc}") from None
         typer.echo(f"wrote {out} ({len(df)} rows x {len(df.columns)} columns)")
+
+
+def _write_mission_log(scenario, vehicle, seed: int, log: Path, lonlat: bool, log_format: str) -> None:
+    """``simulate --log``: the mission log, the navigation map and the method settings of the run."""
+    from tanbench import store
+    from tanbench.missions.logfile import write_log
+    from tanbench.missions.simulated import MAP_FILE, SETTINGS_FILE, settings_text, simulated_log, write_map
+    from tanbench.terrain import navigation_map
+
+    mission = simulated_log(scenario, vehicle, seed, lonlat)
+    files = write_log(log, mission, log_format)
+    write_map(navigation_map(scenario.terrain, scenario.map_resolution_m), log / MAP_FILE)
+    store.write_text(settings_text(scenario), log / SETTINGS_FILE)
+    typer.echo(f"wrote the mission log {log} ({len(files) - 1} tables, {'lon/lat' if lonlat else 'map-frame'} "
+               f"positions), its navigation map {log / MAP_FILE} and method settings {log / SETTINGS_FILE}")
+
+
+@app.command(help="Run methods over a recorded mission log (docs/missions.md) and a map; score them against the "
+             "log's reference track when it has one, else write their estimates only."
+             + EXAMPLE.format("tanbench replay mission --map mission/map.npz --methods tight-dvl,pmf-dvl"))
+def replay(
+    log: Path = typer.Argument(..., help="Mission-log directory."),
+    map_path: Optional[str] = typer.Option(None, "--map", help="The navigation map: a bathymetry file, files or "
+                                           "glob of tiles (docs/maps.md) [default: map.path of --settings]."),
+    methods: Optional[list[str]] = typer.Option(None, "--methods", "-m", help="Methods, comma-separated or "
+                                                "repeated [default: tight-dvl,tight-sbe,loose-dvl]."),
+    settings: Optional[Path] = typer.Option(None, "--settings", help="YAML of the methods' settings (profile, "
+                                            "particles, sampling_time_s, filter, method_options) and the map's "
+                                            "options (map: crs, rows, map_error_m, ...)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the methods' random numbers."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/replay-<log>]."),
+):
+    import pandas as pd
+
+    from tanbench.missions.replay import replay as replay_log
+    from tanbench.results import to_markdown
+
+    report = replay_log(log, map_path, methods, settings, seed, out, echo=lambda m: typer.echo(m, err=True))
+    for note in report.notes:
+        typer.echo(f"note: {note}", err=True)
+    rows = pd.DataFrame(report.rows)
+    if report.has_reference:
+        keep = ["method", "status", "final_horizontal_error_m", "mean_horizontal_error_m", "rmse_after_convergence_m",
+                "final_heading_error_deg", "diverged", "filter_wall_s"]
+        title = "scored against the log's reference track"
+    else:
+        keep = ["method", "status", "filter_wall_s"]
+        title = "no reference track: estimates only"
+    typer.echo(to_markdown(rows[[c for c in keep if c in rows.columns]], title=f"{log}: {title}"))
+    typer.echo(f"results in {report.out} (runs.parquet, estimates.parquet"
+               f"{', series.parquet' if report.has_reference else ''})")
+    if report.failed:
+        for row in report.failed:
+            typer.echo(f"failed: {row['method']}: {row['error']}", err=True)
+        raise typer.Exit(1)
 
 
 @terrain_app.command("stats", help="Depth and roughness under the tracks (the paper's Section 4.2 statistics)."

@@ -45,10 +45,14 @@ def recovery_stats(t: np.ndarray, reinit: np.ndarray, healthy: np.ndarray, steps
     return len(times), first, float(np.mean(times)) if times else float("nan")
 
 
-def score(scenario, vehicle, updates, out, wall: float, method: str | None = None) -> RunResult:
+def score(scenario, vehicle, updates, out, wall: float, method: str | None = None, nmap=None,
+          bound=None) -> RunResult:
     """Metrics and series of one method's checked output ``out`` on one run.
 
-    ``method`` names the method for its posterior Cramer-Rao bound (none without a name).
+    ``method`` names the method for its posterior Cramer-Rao bound (none without a name),
+    unless ``bound`` gives the bound's series; ``nmap`` is the navigation map (default:
+    the scenario's). ``vehicle`` has the observations (``obs``) and the truth (``truth``:
+    t, pos, yaw at the IMU samples), simulated or a mission log's reference.
     """
     from tanbench.metrics.run_metrics import score_consistency_and_bound
 
@@ -81,7 +85,7 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
     healthy = out.extra.get("healthy", np.zeros(t.size))
     recoveries, first_reinit, mean_recovery = recovery_stats(t, reinit, np.asarray(healthy) > 0.5,
                                                              f.divergence_steps)
-    nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
+    nmap = nmap if nmap is not None else navigation_map(scenario.terrain, scenario.map_resolution_m)
     metrics = {
         "final_horizontal_error_m": float(err_h[-1]),
         "mean_horizontal_error_m": float(err_h.mean()),
@@ -104,7 +108,7 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
     var_n = out.var_n if out.var_n is not None else nan
     cov_en = out.cov_en if out.cov_en is not None else nan
     consistency, bound_series = score_consistency_and_bound(scenario, method, t, err_e, err_n, var_e, var_n,
-                                                            cov_en, conv_time, rmse)
+                                                            cov_en, conv_time, rmse, bound)
     metrics.update(consistency)
     series = {
         "t": t,

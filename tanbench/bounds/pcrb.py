@@ -241,18 +241,29 @@ def true_tracks(scenario, sensor: str) -> tuple[list[TrueTrack], np.ndarray]:
     from tanbench.simulation import noise_free_world
 
     truth, ping_idx, dvl_true, sbe_true = noise_free_world(json.dumps(scenario.world_spec(), sort_keys=True))
-    step = int(round(scenario.sampling_time_s * scenario.sensors.sonar_rate_hz))
-    rows = np.arange(0, ping_idx.size, step)
-    upd = ping_idx[rows]
-    inc = compute_increments(truth.dt, truth.pos, truth.pitch, truth.roll, truth.yaw, upd)
     s = scenario.sensors
     if sensor == "dvl":
         ranges, beams = dvl_true, dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg)
     else:
         ranges, beams = sbe_true, altimeter_beam_vectors()
-    track = TrueTrack(t=truth.t[upd], pos=truth.pos[upd], pitch=truth.pitch[upd], roll=truth.roll[upd],
-                      yaw=truth.yaw[upd], ranges=np.asarray(ranges)[rows], increments=inc)
-    return [track], beams
+    return [update_track(scenario, truth, ping_idx, ranges)], beams
+
+
+def update_track(scenario, truth, ping_idx: np.ndarray, ranges) -> TrueTrack:
+    """A true trajectory at the scenario's filter updates: ``truth`` (t, dt, pos, pitch, roll, yaw at
+    the IMU samples; a simulation's truth or a mission log's reference), the pings' IMU sample
+    indices and the beams' true ranges (pings, m)."""
+    step = int(round(scenario.sampling_time_s * scenario.sensors.sonar_rate_hz))
+    rows = np.arange(0, ping_idx.size, step)
+    upd = ping_idx[rows]
+    inc = compute_increments(truth.dt, truth.pos, truth.pitch, truth.roll, truth.yaw, upd)
+    return TrueTrack(t=truth.t[upd], pos=truth.pos[upd], pitch=truth.pitch[upd], roll=truth.roll[upd],
+                     yaw=truth.yaw[upd], ranges=np.asarray(ranges)[rows], increments=inc)
+
+
+def bound_series(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, scenario, states: str) -> pd.DataFrame:
+    """The PCRB series (t, ``BOUND_COLUMNS``) along ``tracks`` for the filter of ``scenario`` (``states``)."""
+    return bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model_for(scenario, states)))
 
 
 def method_bound(scenario, method: str) -> pd.DataFrame | None:
@@ -270,6 +281,4 @@ def _bound_cached(scenario_json: str, sensor: str, states: str) -> pd.DataFrame:
 
     scenario = Scenario(**json.loads(scenario_json))
     tracks, beams = true_tracks(scenario, sensor)
-    nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
-    P = bound(tracks, beams, nmap, model_for(scenario, states))
-    return bound_frame(tracks[0].t, P)
+    return bound_series(tracks, beams, navigation_map(scenario.terrain, scenario.map_resolution_m), scenario, states)

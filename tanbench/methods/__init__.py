@@ -3,6 +3,7 @@
 ``run_method`` is what the sweep engine calls: it builds the method's
 :class:`~tanbench.methods.api.MethodContext` from the run's observations (never the
 truth), runs the method, checks its output and scores it (:mod:`tanbench.scoring`).
+``run_estimates`` is its first half, which ``tanbench replay`` shares for recorded missions.
 """
 
 from __future__ import annotations
@@ -15,31 +16,43 @@ from tanbench.methods.api import MethodContext, MethodOutput, Updates, check_sta
 from tanbench.methods.registry import MethodRecord, get, names, register
 
 __all__ = ["MethodContext", "MethodOutput", "MethodRecord", "Updates", "get", "names", "register",
-           "run_method", "method_context", "check_start_on_map", "update_indices"]
+           "run_method", "run_estimates", "method_context", "check_start_on_map", "update_indices"]
 
 
-def method_context(scenario, name: str, vehicle, seed: np.random.SeedSequence, record=None) -> MethodContext:
-    """What method ``name`` is given for one run: observations, map, updates, rng, options."""
+def method_context(scenario, name: str, vehicle, seed: np.random.SeedSequence, record=None,
+                   nmap=None) -> MethodContext:
+    """What method ``name`` is given for one run: observations, map, updates, rng, options.
+
+    ``vehicle.obs`` are the observations, simulated or read from a mission log; ``nmap`` the
+    navigation map (default: the scenario's, checked against the start of its track).
+    """
     from tanbench.methods.api import method_view
     from tanbench.terrain import navigation_map
 
     record = record or get(name)
-    nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
-    check_start_on_map(scenario, nmap)
+    if nmap is None:
+        nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
+        check_start_on_map(scenario, nmap)
     return MethodContext(name=name, scenario=method_view(scenario), obs=vehicle.obs, nmap=nmap,
                          updates=update_indices(scenario, vehicle.obs), rng=np.random.default_rng(seed),
                          options=record.parse_options(scenario))
 
 
-def run_method(scenario, name: str, vehicle, seed: np.random.SeedSequence):
-    """Run method ``name`` on one run's ``vehicle`` data with its filter ``seed``; score it."""
+def run_estimates(scenario, name: str, vehicle, seed: np.random.SeedSequence, nmap=None):
+    """Run method ``name`` on one run's observations: (its context, its checked output, its wall time)."""
     from tanbench.methods.api import as_output
-    from tanbench.scoring import score
 
     record = get(name)
-    ctx = method_context(scenario, name, vehicle, seed, record)
+    ctx = method_context(scenario, name, vehicle, seed, record, nmap)
     started = time.perf_counter()
     raw = record.run(ctx)
     wall = time.perf_counter() - started
-    out = as_output(name, raw, ctx.updates.size)
+    return ctx, as_output(name, raw, ctx.updates.size), wall
+
+
+def run_method(scenario, name: str, vehicle, seed: np.random.SeedSequence):
+    """Run method ``name`` on one run's ``vehicle`` data with its filter ``seed``; score it."""
+    from tanbench.scoring import score
+
+    ctx, out, wall = run_estimates(scenario, name, vehicle, seed)
     return score(scenario, vehicle, ctx.updates, out, wall, name)

@@ -1,0 +1,210 @@
+"""Recorded missions: a lon/lat log on a geographic map (the existing georeferencing), and bad
+logs, maps and settings refused with one clear line and nothing written."""
+
+from __future__ import annotations
+
+import math
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from sweep_support import cli, error_lines
+from tanbench.config import Scenario
+from tanbench.earth import radii_of_curvature
+from tanbench.errors import TanbenchError
+from tanbench.missions.logfile import MissionLog, read_log, write_log
+from tanbench.missions.replay import replay
+from tanbench.missions.simulated import simulated_log, write_map
+from tanbench.simulation import simulate_vehicle
+from tanbench.terrain import navigation_map
+from tanbench.terrain.georef import local_to_lonlat, lonlat_to_local
+
+LON0, LAT0 = -121.9, 36.8  # where the geographic copy of the map is put
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    """A short simulated log of area A in the map's metres, and its navigation map."""
+    d = tmp_path_factory.mktemp("inputs")
+    sc = Scenario(area="A", duration_s=40, particles=300)
+    log = simulated_log(sc, simulate_vehicle(sc, np.random.SeedSequence(4)), 4)
+    write_log(d / "log", log)
+    nmap = navigation_map(sc.terrain, sc.map_resolution_m)
+    write_map(nmap, d / "map.npz")
+    (d / "settings.yaml").write_text(yaml.safe_dump({"particles": 300}))
+    return d, log, nmap
+
+
+def geographic_map(nmap, path):
+    """``nmap``'s nodes as a lon/lat grid (south-west node at LON0, LAT0) whose projected spacing is
+    ``nmap``'s: the latitude step fixes the centre latitude, which fixes the metres per degree."""
+    ny, nx = nmap.z.shape
+    lat_c = LAT0
+    for _ in range(6):
+        r_n, r_e = radii_of_curvature(math.radians(lat_c))
+        k_n, k_e = r_n * math.pi / 180, r_e * math.cos(math.radians(lat_c)) * math.pi / 180
+        lat_c = LAT0 + 0.5 * (ny - 1) * nmap.res_n / k_n
+    np.savez(path, z=nmap.z, e0=LON0, n0=LAT0, res_e=nmap.res_e / k_e, res_n=nmap.res_n / k_n)
+    return path
+
+
+def lonlat_log(log: MissionLog, nmap, geo) -> MissionLog:
+    """``log`` with its positions as lon/lat in ``geo``'s frame (the same points on the seafloor)."""
+    tables = dict(log.tables)
+    for name in ("navigation", "reference"):
+        df = tables[name].copy()
+        lon, lat = local_to_lonlat(geo, df.pop("east_m") - nmap.e0, df.pop("north_m") - nmap.n0)
+        df.insert(1, "lon_deg", lon)
+        df.insert(2, "lat_deg", lat)
+        tables[name] = df
+    return MissionLog(meta=log.meta, tables=tables)
+
+
+def test_a_lonlat_log_on_a_geographic_map_gives_the_metric_log_s_results(base, tmp_path):
+    """The georeferencing carries a lon/lat log onto a lon/lat map: the same estimates as the metric
+    log on the metric map (to a micrometre after the shift of origin), lon/lat in the estimates."""
+    from tanbench.terrain.files import read_grid
+
+    d, log, nmap = base
+    geo_path = geographic_map(nmap, tmp_path / "geo.npz")
+    (tmp_path / "geo.yaml").write_text(yaml.safe_dump({"particles": 300, "map": {"crs": "epsg4326"}}))
+    from tanbench.terrain.georef import to_local
+
+    geo = to_local(read_grid(geo_path, crs="epsg4326"))
+    assert geo.meta["crs"] == "local" and abs(geo.res_e - nmap.res_e) < 1e-9 and abs(geo.res_n - nmap.res_n) < 1e-9
+    write_log(tmp_path / "lonlat", lonlat_log(log, nmap, geo))
+    assert "lon_deg" in pd.read_parquet(tmp_path / "lonlat" / "navigation.parquet").columns
+    methods = ["tight-dvl,loose-dvl"]
+    metric = replay(d / "log", str(d / "map.npz"), methods, d / "settings.yaml", out=tmp_path / "metric")
+    lonlat = replay(tmp_path / "lonlat", str(geo_path), methods, tmp_path / "geo.yaml", out=tmp_path / "geo")
+    a = pd.read_parquet(tmp_path / "metric" / "estimates.parquet")
+    b = pd.read_parquet(tmp_path / "geo" / "estimates.parquet")
+    assert {"lon_deg", "lat_deg", "nav_lon_deg"} <= set(b.columns) and "lon_deg" not in a.columns
+    np.testing.assert_allclose(b["east_m"] + nmap.e0, a["east_m"], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(b["north_m"] + nmap.n0, a["north_m"], rtol=0, atol=1e-6)
+    e, n = lonlat_to_local(geo, b["lon_deg"], b["lat_deg"])
+    np.testing.assert_allclose(e, b["east_m"], rtol=0, atol=1e-6)
+    for x, y in zip(metric.rows, lonlat.rows):
+        assert x["status"] == y["status"] == "ok"
+        assert abs(x["final_horizontal_error_m"] - y["final_horizontal_error_m"]) < 1e-6
+
+
+def _edit_table(name, edit):
+    def setup(log_dir):
+        path = log_dir / f"{name}.parquet"
+        edit(pd.read_parquet(path)).to_parquet(path)
+    return setup
+
+
+def _edit_meta(edit):
+    def setup(log_dir):
+        path = log_dir / "mission.yaml"
+        path.write_text(yaml.safe_dump(edit(yaml.safe_load(path.read_text())), sort_keys=False))
+    return setup
+
+
+def _remove(name):
+    return lambda log_dir: (log_dir / name).unlink()
+
+
+def _both(*setups):
+    def setup(log_dir):
+        for one in setups:
+            one(log_dir)
+    return setup
+
+
+def _set(d, dotted, value):
+    *parts, last = dotted.split(".")
+    for p in parts:
+        d = d.setdefault(p, {})
+    d[last] = value
+    return d
+
+
+def _with(dotted, value):
+    return lambda data: (_set(data, dotted, value), data)[1]
+
+
+LOG_CASES = [
+    ("no mission.yaml", _remove("mission.yaml"), {}, "not a mission log (no mission.yaml"),
+    ("no imu table", _remove("imu.parquet"), {}, "no imu table (imu.parquet or imu.csv"),
+    ("a column without its unit", _edit_table("navigation", lambda df: df.rename(columns={"east_m": "east"})), {},
+     "navigation.parquet: no column 'east_m'"),
+    ("an unknown column", _edit_table("dvl", lambda df: df.assign(quality=1.0)), {}, "unknown column 'quality'"),
+    ("a quantity in two units", _edit_table("navigation", lambda df: df.assign(pitch_deg=0.0)), {},
+     "pitch is given twice (pitch_rad, pitch_deg)"),
+    ("text where numbers belong", _edit_table("depth", lambda df: df.assign(depth_m="deep")), {},
+     "column 'depth_m' is not numeric"),
+    ("times going back", _edit_table("dvl", lambda df: df.iloc[::-1]), {}, "t_s must be finite and strictly increasing"),
+    ("an irregular IMU", _edit_table("imu", lambda df: df.drop(index=500)), {}, "imu samples 499 and 500 are 0.02 s apart"),
+    ("an IMU rate that is not the table's", _edit_meta(_with("sensors.imu_rate_hz", 100.5)), {},
+     "the imu samples come every 0.01 s on average, not every 1 / sensors.imu_rate_hz = 0.00995025 s"),
+    ("a reference in another coordinate system",
+     _edit_table("reference", lambda df: df.rename(columns={"east_m": "lon_deg", "north_m": "lat_deg"})), {},
+     "the reference track's positions are in lon/lat but the navigation solution's are not"),
+    ("another format version", _edit_meta(_with("format_version", 2)), {}, "reads mission-log version 1, not 2"),
+    ("an unknown metadata key", _edit_meta(_with("sensors.sonar_rate", 1.0)), {}, "sensors.sonar_rate: unknown key"),
+    ("beams that do not match the table", _edit_meta(_with("sensors.beam_azimuths_deg", [0.0, 120.0, 240.0])), {},
+     "dvl has 4 beam range columns but mission.yaml describes 3 dvl beams"),
+    ("the DVL geometry twice", _edit_meta(_with("beams", {"dvl": {"tilt_deg": 25.0, "azimuths_deg": [0, 90, 180, 270]}})),
+     {}, "the DVL beams are given twice"),
+    ("a wrong sonar rate", _edit_meta(_with("sensors.sonar_rate_hz", 2.0)), {},
+     "dvl pings come every 1 s (median), but sensors.sonar_rate_hz = 2"),
+    ("a reference that ends early", _edit_table("reference", lambda df: df.iloc[: len(df) // 2]), {},
+     "the reference table covers t = 0..19.99 s, but it must cover 0..40 s"),
+    ("a log off the map", _edit_table("navigation", lambda df: df.assign(east_m=df["east_m"] + 1e5)), {},
+     "the initial uncertainty (filter.initial_area_m / 2 = 75 m around it) leaves the map"),
+    ("a lon/lat log on a map in metres",
+     _both(_remove("reference.parquet"),
+           _edit_table("navigation", lambda df: df.rename(columns={"east_m": "lon_deg", "north_m": "lat_deg"}))), {},
+     "positions are lon/lat but the map"),
+    ("an unknown method", None, {"methods": ["tight-dvl,kalman-magic"]}, "unknown method 'kalman-magic'"),
+    ("no map", None, {"map_path": None}, "no map: give --map FILE"),
+    ("a missing map file", None, {"map_path": "nowhere.npz"}, "nowhere.npz"),
+]
+
+
+@pytest.mark.parametrize("setup, changes, message", [c[1:] for c in LOG_CASES], ids=[c[0] for c in LOG_CASES])
+def test_a_bad_log_map_or_method_is_one_clear_error_and_nothing_is_written(base, tmp_path, setup, changes, message):
+    d, _, _ = base
+    log_dir = tmp_path / "log"
+    shutil.copytree(d / "log", log_dir)
+    if setup is not None:
+        setup(log_dir)
+    args = {"map_path": str(d / "map.npz"), "methods": ["tight-dvl"], "settings_path": d / "settings.yaml", **changes}
+    with pytest.raises(TanbenchError) as err:
+        replay(log_dir, out=tmp_path / "out", **args)
+    assert message in str(err.value) and "\n" not in str(err.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_cli_refuses_with_one_line_and_exit_2(base, tmp_path):
+    d, _, _ = base
+    (tmp_path / "bad.yaml").write_text("particles: 300\nfilter: {resampling: sometimes}\n")
+    (tmp_path / "sweep-results").mkdir()
+    (tmp_path / "sweep-results" / "sweep.yaml").write_text("name: x\n")
+    cases = [
+        (["replay", d / "log", "--map", d / "map.npz", "--settings", tmp_path / "bad.yaml", "--out", tmp_path / "o"],
+         "filter.resampling: Input should be"),
+        (["replay", d / "log", "--map", d / "map.npz", "--out", tmp_path / "sweep-results"], "holds a sweep's results"),
+        (["simulate", "--area", "A", "--duration", "20", "--log", tmp_path / "o", "--lonlat"],
+         "--lonlat needs a map georeferenced in lon/lat or Web Mercator"),
+        (["simulate", "--area", "A", "--sweep", "configs/quick.yaml", "--log", tmp_path / "o"],
+         "give --area or --sweep, not both"),
+    ]
+    for args, message in cases:
+        proc = cli(*args)
+        lines = error_lines(proc.stderr)
+        assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), (args, proc.stderr)
+        assert message in lines[0], (message, lines[0])
+        assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "o").exists() and not (tmp_path / "sweep-results" / "runs.parquet").exists()
+
+
+def test_replay_help_is_plain_and_points_to_the_format():
+    proc = cli("replay", "--help")
+    assert proc.returncode == 0 and "docs/missions.md" in proc.stdout and "<bool>" not in proc.stdout
