@@ -14,3 +14,68 @@ VARIANTS.update({
     "tight-sbe/no-floor": {"method": "tight-sbe", "filter": {"min_spread_m": 0.0}},
     "loose-dvl/no-floor": {"method": "loose-dvl", "filter": {"min_spread_m": 0.0}},
 })
+VARIANTS.update({
+    "tight-dvl/9000": {"method": "tight-dvl", "scenario": {"particles": 9000}},
+    "tight-dvl/9000-no-floor": {"method": "tight-dvl", "scenario": {"particles": 9000}, "filter": {"min_spread_m": 0.0}},
+})
+
+# prototypes (tan_proto.tight): P = posterior-sized regularisation, F0 = no 2 m floor, T = tempering
+PT = {"dvl": "tan_proto.tight:TIGHT_DVL", "sbe": "tan_proto.tight:TIGHT_SBE"}
+for s in ("dvl", "sbe"):
+    VARIANTS.update({
+        f"pt-{s}/P": {"method": PT[s], "options": {"regularisation": "posterior"}},
+        f"pt-{s}/P-F0": {"method": PT[s], "options": {"regularisation": "posterior", "floor_m": 0.0}},
+        f"pt-{s}/T": {"method": PT[s], "options": {"tempering": True}},
+        f"pt-{s}/T-P": {"method": PT[s], "options": {"tempering": True, "regularisation": "posterior"}},
+        f"pt-{s}/T-P-F0": {"method": PT[s], "options": {"tempering": True, "regularisation": "posterior",
+                                                        "floor_m": 0.0}},
+    })
+for s in ("dvl", "sbe"):
+    VARIANTS.update({
+        f"pt-{s}/B": {"method": PT[s], "options": {"bias_walk": True}},
+        f"pt-{s}/B-F0": {"method": PT[s], "options": {"bias_walk": True, "floor_m": 0.0}},
+        f"pt-{s}/B-P-F0": {"method": PT[s], "options": {"bias_walk": True, "regularisation": "posterior",
+                                                        "floor_m": 0.0}},
+        f"pt-{s}/B-T-P-F0": {"method": PT[s], "options": {"bias_walk": True, "tempering": True,
+                                                          "regularisation": "posterior", "floor_m": 0.0}},
+        f"pt-{s}/B-T-P": {"method": PT[s], "options": {"bias_walk": True, "tempering": True,
+                                                       "regularisation": "posterior"}},
+        f"pt-{s}/B-T": {"method": PT[s], "options": {"bias_walk": True, "tempering": True}},
+    })
+for s in ("dvl", "sbe"):
+    VARIANTS.update({
+        f"pt-{s}/B-M": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True}},
+        f"pt-{s}/B-M-F0": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True, "floor_m": 0.0}},
+        f"pt-{s}/B-M-T-P-F0": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True,
+                                                            "tempering": True, "regularisation": "posterior",
+                                                            "floor_m": 0.0}},
+        f"pt-{s}/B-M-T-P": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True,
+                                                         "tempering": True, "regularisation": "posterior"}},
+    })
+
+# loose prototypes (tan_proto.loose): G = bias gate (3 sigma) + shape gate (0.9), R = KF-sized re-initialisation,
+# T = tempering
+PL = "tan_proto.loose:LOOSE_DVL"
+VARIANTS.update({
+    "pl/G": {"method": PL, "options": {"bias_gate_sigma": 3.0, "shape_gate": 0.9}},
+    "pl/R": {"method": PL, "options": {"reloc_kf": True}},
+    "pl/G-R": {"method": PL, "options": {"bias_gate_sigma": 3.0, "shape_gate": 0.9, "reloc_kf": True}},
+    "pl/G-R-T": {"method": PL, "options": {"bias_gate_sigma": 3.0, "shape_gate": 0.9, "reloc_kf": True,
+                                           "tempering": True}},
+})
+VARIANTS.update({
+    "pl/H": {"method": PL, "options": {"heading_offsets": True}},
+    "pl/H-G": {"method": PL, "options": {"heading_offsets": True, "bias_gate_sigma": 3.0, "shape_gate": 0.9}},
+    "pl/H-G-T": {"method": PL, "options": {"heading_offsets": True, "bias_gate_sigma": 3.0, "shape_gate": 0.9,
+                                           "tempering": True}},
+})
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-T-F0"] = {"method": PT[s], "options": {"bias_walk": True, "tempering": True, "floor_m": 0.0}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-S"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor"}}
+    VARIANTS[f"pt-{s}/B-S-F0"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor",
+                                                              "floor_m": 0.0}}
+    VARIANTS[f"pt-{s}/B-S-T-F0"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor",
+                                                                "floor_m": 0.0, "tempering": True}}
+    VARIANTS[f"pt-{s}/B-S-T"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor",
+                                                             "tempering": True}}

@@ -41,9 +41,21 @@ def _relief(name, heading_deg, centre):
 WORLDS = {
     "A": (14140014, {**AREA, "area": "A"}),
     "B": (14140014, {**AREA, "area": "B"}),
+    # area A with a map that is the truth (2.5 m nodes, no node errors): the gap left is the filter's own
+    # and the navigation system's unmodelled errors'
+    "A-exactmap": (14140014, {**AREA, "area": "A", "map_resolution_m": 2.5,
+                              "terrain": {"kind": "synthetic", "seed": 1, "map_error_m": 0.0}}),
+    # ... and without the DVL scale error and the gyros' in-run bias drift (the filter models neither)
+    "A-exactmap-nav": (14140014, {**AREA, "area": "A", "map_resolution_m": 2.5,
+                                  "terrain": {"kind": "synthetic", "seed": 1, "map_error_m": 0.0},
+                                  "sensors": {"dvl_scale_error": 0.0, "gyro_bias_instability_deg_h": 0.0}}),
     "M20": (367900, {**MONTEREY_SCENARIO, "map_resolution_m": 20}),
     "M30": (367900, {**MONTEREY_SCENARIO, "map_resolution_m": 30}),
     "R1": (24240001, _relief("relief-r1", 0.0, (930.0, 1160.0))),
+    # R1 with a map that is the truth (its 8 m nodes, no node errors): is the drift the map's or the filter's?
+    "R1-exactmap": (24240001, {**_relief("relief-r1", 0.0, (930.0, 1160.0)), "map_resolution_m": 8,
+                               "terrain": {"kind": "file", "path": str(RELIEF_DIR / "relief-r1.npz"),
+                                           "map_error_m": 0.0}}),
     "R2": (24240002, _relief("relief-r2", 90.0, (1160.0, 930.0))),
 }
 
