@@ -79,3 +79,20 @@ for s in ("dvl", "sbe"):
                                                                 "floor_m": 0.0, "tempering": True}}
     VARIANTS[f"pt-{s}/B-S-T"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor",
                                                              "tempering": True}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-L"] = {"method": PT[s], "options": {"bias_walk": True, "relocalise": True}}
+    VARIANTS[f"pt-{s}/B-T-L"] = {"method": PT[s], "options": {"bias_walk": True, "relocalise": True,
+                                                             "tempering": True}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-P"] = {"method": PT[s], "options": {"bias_walk": True, "regularisation": "posterior"}}
+VARIANTS.update({
+    "pl/H-G-f1": {"method": PL, "options": {"heading_offsets": True, "bias_gate_sigma": 3.0, "shape_gate": 0.9},
+                  "filter": {"loose_fix_floor_m": 1.0}},
+    "pl/H-f1": {"method": PL, "options": {"heading_offsets": True}, "filter": {"loose_fix_floor_m": 1.0}},
+})
+
+# the candidates frozen for the verification runs (docs/filters.md section 4.1), and the same at the particle
+# counts whose built-in wall time matches the point-mass filter's (timing.py, area A)
+FINAL = {"pt-dvl/B-P-F0": 1400, "pt-sbe/B-P-F0": 2500, "pl/H-G-f1": 2000}
+for label, n in FINAL.items():
+    VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
