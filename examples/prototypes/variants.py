@@ -96,3 +96,9 @@ VARIANTS.update({
 FINAL = {"pt-dvl/B-P-F0": 1400, "pt-sbe/B-P-F0": 2500, "pl/H-G-f1": 2000}
 for label, n in FINAL.items():
     VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-Ph-F0"] = {"method": PT[s], "options": {"bias_walk": True, "regularisation": "posterior",
+                                                                "bandwidth": 0.5, "floor_m": 0.0}}
+FINAL2 = {"pt-dvl/B-Ph-F0": 1400, "pt-sbe/B-Ph-F0": 2500}
+for label, n in FINAL2.items():
+    VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}

@@ -57,6 +57,10 @@ WORLDS = {
                                "terrain": {"kind": "file", "path": str(RELIEF_DIR / "relief-r1.npz"),
                                            "map_error_m": 0.0}}),
     "R2": (24240002, _relief("relief-r2", 90.0, (1160.0, 930.0))),
+    # added after R2 had been looked at (docs/filters.md 4.3): R1's DEM mirrored east-west, legs at 30 deg
+    "R3": (24240003, {**_relief("relief-r3", 30.0, (930.0, 1160.0)), "trajectory": {
+        "kind": "survey", "centre_en_m": [930.0, 1160.0], "heading_deg": 30.0, "leg_length_m": 1200.0,
+        "leg_spacing_m": 250.0, "legs": 3, "depth_m": 20.0}}),
 }
 
 
@@ -68,7 +72,7 @@ def world(name: str) -> tuple[int, dict]:
 def build_relief(out_dir: Path = RELIEF_DIR) -> None:
     """Write relief-r1.npz and relief-r2.npz: the Monterey Canyon head DEM (the four tiles, read in
     place) resampled bilinearly onto 8 m nodes and rescaled linearly to -180..-60 m; r2 is r1
-    transposed (east and north swapped: another layout of the same relief)."""
+    transposed (east and north swapped: another layout of the same relief), r3 r1 mirrored east-west."""
     from tanbench.terrain.files import read_tiles
 
     paths = sorted(Path(MONTEREY).parent.glob("MontereyBay.R_*.tif"))
@@ -82,7 +86,7 @@ def build_relief(out_dir: Path = RELIEF_DIR) -> None:
         raise SystemExit("the resampled DEM has holes")
     z = -180.0 + (z - z.min()) / (z.max() - z.min()) * 120.0
     out_dir.mkdir(parents=True, exist_ok=True)
-    for name, grid in (("relief-r1", z), ("relief-r2", z.T.copy())):
+    for name, grid in (("relief-r1", z), ("relief-r2", z.T.copy()), ("relief-r3", z[:, ::-1].copy())):
         np.savez(out_dir / f"{name}.npz", z=grid, e0=0.0, n0=0.0, res_e=res, res_n=res)
         print(f"{name}: {grid.shape[1]} x {grid.shape[0]} nodes at {res:g} m, "
               f"{grid.min():.1f}..{grid.max():.1f} m")
