@@ -49,6 +49,8 @@ WORLDS = {
     "A-exactmap-nav": (14140014, {**AREA, "area": "A", "map_resolution_m": 2.5,
                                   "terrain": {"kind": "synthetic", "seed": 1, "map_error_m": 0.0},
                                   "sensors": {"dvl_scale_error": 0.0, "gyro_bias_instability_deg_h": 0.0}}),
+    # configs/quick.yaml's default cell (the example of a verdict the figure contradicts)
+    "Q": (20261123, {**AREA, "area": "A", "particles": 2000}),
     "M20": (367900, {**MONTEREY_SCENARIO, "map_resolution_m": 20}),
     "M30": (367900, {**MONTEREY_SCENARIO, "map_resolution_m": 30}),
     "R1": (24240001, _relief("relief-r1", 0.0, (930.0, 1160.0))),
