@@ -1,0 +1,104 @@
+"""The method variants ``measure.py`` runs: a name -> the method, its options, filter settings.
+
+Built-ins at the recommended defaults, built-in ablations through existing ``filter.*``
+options, and the prototypes of ``tan_proto`` (plug-ins written against the public method
+API, reusing tanbench's jitted kernels).
+"""
+
+BUILTIN = ("tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "pmf-sbe", "mpf-dvl")
+
+VARIANTS = {name: {"method": name} for name in BUILTIN}
+# built-in ablations (existing options)
+VARIANTS.update({
+    "tight-dvl/no-floor": {"method": "tight-dvl", "filter": {"min_spread_m": 0.0}},
+    "tight-sbe/no-floor": {"method": "tight-sbe", "filter": {"min_spread_m": 0.0}},
+    "loose-dvl/no-floor": {"method": "loose-dvl", "filter": {"min_spread_m": 0.0}},
+})
+VARIANTS.update({
+    "tight-dvl/9000": {"method": "tight-dvl", "scenario": {"particles": 9000}},
+    "tight-dvl/9000-no-floor": {"method": "tight-dvl", "scenario": {"particles": 9000}, "filter": {"min_spread_m": 0.0}},
+})
+
+# prototypes (tan_proto.tight): P = posterior-sized regularisation, F0 = no 2 m floor, T = tempering
+PT = {"dvl": "tan_proto.tight:TIGHT_DVL", "sbe": "tan_proto.tight:TIGHT_SBE"}
+for s in ("dvl", "sbe"):
+    VARIANTS.update({
+        f"pt-{s}/P": {"method": PT[s], "options": {"regularisation": "posterior"}},
+        f"pt-{s}/P-F0": {"method": PT[s], "options": {"regularisation": "posterior", "floor_m": 0.0}},
+        f"pt-{s}/T": {"method": PT[s], "options": {"tempering": True}},
+        f"pt-{s}/T-P": {"method": PT[s], "options": {"tempering": True, "regularisation": "posterior"}},
+        f"pt-{s}/T-P-F0": {"method": PT[s], "options": {"tempering": True, "regularisation": "posterior",
+                                                        "floor_m": 0.0}},
+    })
+for s in ("dvl", "sbe"):
+    VARIANTS.update({
+        f"pt-{s}/B": {"method": PT[s], "options": {"bias_walk": True}},
+        f"pt-{s}/B-F0": {"method": PT[s], "options": {"bias_walk": True, "floor_m": 0.0}},
+        f"pt-{s}/B-P-F0": {"method": PT[s], "options": {"bias_walk": True, "regularisation": "posterior",
+                                                        "floor_m": 0.0}},
+        f"pt-{s}/B-T-P-F0": {"method": PT[s], "options": {"bias_walk": True, "tempering": True,
+                                                          "regularisation": "posterior", "floor_m": 0.0}},
+        f"pt-{s}/B-T-P": {"method": PT[s], "options": {"bias_walk": True, "tempering": True,
+                                                       "regularisation": "posterior"}},
+        f"pt-{s}/B-T": {"method": PT[s], "options": {"bias_walk": True, "tempering": True}},
+    })
+for s in ("dvl", "sbe"):
+    VARIANTS.update({
+        f"pt-{s}/B-M": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True}},
+        f"pt-{s}/B-M-F0": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True, "floor_m": 0.0}},
+        f"pt-{s}/B-M-T-P-F0": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True,
+                                                            "tempering": True, "regularisation": "posterior",
+                                                            "floor_m": 0.0}},
+        f"pt-{s}/B-M-T-P": {"method": PT[s], "options": {"bias_walk": True, "map_correlation": True,
+                                                         "tempering": True, "regularisation": "posterior"}},
+    })
+
+# loose prototypes (tan_proto.loose): G = bias gate (3 sigma) + shape gate (0.9), R = KF-sized re-initialisation,
+# T = tempering
+PL = "tan_proto.loose:LOOSE_DVL"
+VARIANTS.update({
+    "pl/G": {"method": PL, "options": {"bias_gate_sigma": 3.0, "shape_gate": 0.9}},
+    "pl/R": {"method": PL, "options": {"reloc_kf": True}},
+    "pl/G-R": {"method": PL, "options": {"bias_gate_sigma": 3.0, "shape_gate": 0.9, "reloc_kf": True}},
+    "pl/G-R-T": {"method": PL, "options": {"bias_gate_sigma": 3.0, "shape_gate": 0.9, "reloc_kf": True,
+                                           "tempering": True}},
+})
+VARIANTS.update({
+    "pl/H": {"method": PL, "options": {"heading_offsets": True}},
+    "pl/H-G": {"method": PL, "options": {"heading_offsets": True, "bias_gate_sigma": 3.0, "shape_gate": 0.9}},
+    "pl/H-G-T": {"method": PL, "options": {"heading_offsets": True, "bias_gate_sigma": 3.0, "shape_gate": 0.9,
+                                           "tempering": True}},
+})
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-T-F0"] = {"method": PT[s], "options": {"bias_walk": True, "tempering": True, "floor_m": 0.0}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-S"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor"}}
+    VARIANTS[f"pt-{s}/B-S-F0"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor",
+                                                              "floor_m": 0.0}}
+    VARIANTS[f"pt-{s}/B-S-T-F0"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor",
+                                                                "floor_m": 0.0, "tempering": True}}
+    VARIANTS[f"pt-{s}/B-S-T"] = {"method": PT[s], "options": {"bias_walk": True, "range_sigma": "sensor",
+                                                             "tempering": True}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-L"] = {"method": PT[s], "options": {"bias_walk": True, "relocalise": True}}
+    VARIANTS[f"pt-{s}/B-T-L"] = {"method": PT[s], "options": {"bias_walk": True, "relocalise": True,
+                                                             "tempering": True}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-P"] = {"method": PT[s], "options": {"bias_walk": True, "regularisation": "posterior"}}
+VARIANTS.update({
+    "pl/H-G-f1": {"method": PL, "options": {"heading_offsets": True, "bias_gate_sigma": 3.0, "shape_gate": 0.9},
+                  "filter": {"loose_fix_floor_m": 1.0}},
+    "pl/H-f1": {"method": PL, "options": {"heading_offsets": True}, "filter": {"loose_fix_floor_m": 1.0}},
+})
+
+# the candidates frozen for the verification runs (docs/filters.md section 4.1), and the same at the particle
+# counts whose built-in wall time matches the point-mass filter's (timing.py, area A)
+FINAL = {"pt-dvl/B-P-F0": 1400, "pt-sbe/B-P-F0": 2500, "pl/H-G-f1": 2000}
+for label, n in FINAL.items():
+    VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
+for s in ("dvl", "sbe"):
+    VARIANTS[f"pt-{s}/B-Ph-F0"] = {"method": PT[s], "options": {"bias_walk": True, "regularisation": "posterior",
+                                                                "bandwidth": 0.5, "floor_m": 0.0}}
+FINAL2 = {"pt-dvl/B-Ph-F0": 1400, "pt-sbe/B-Ph-F0": 2500}
+for label, n in FINAL2.items():
+    VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
