@@ -2,7 +2,8 @@
 
 ``run_method`` is what the sweep engine calls: it builds the method's
 :class:`~tanbench.methods.api.MethodContext` from the run's observations (never the
-truth), runs the method, checks its output and scores it (:mod:`tanbench.scoring`).
+truth; read-only, in the method's own copies), runs the method, checks its output and
+scores it (:mod:`tanbench.scoring`).
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ import time
 
 import numpy as np
 
-from tanbench.methods.api import MethodContext, MethodOutput, Updates, check_start_on_map, update_indices
+from tanbench.methods.api import (MethodContext, MethodOutput, Updates, as_output, check_start_on_map,
+                                  input_write_error, method_inputs, method_view, update_indices)
 from tanbench.methods.registry import MethodRecord, get, names, register
 
 __all__ = ["MethodContext", "MethodOutput", "MethodRecord", "Updates", "get", "names", "register",
@@ -20,26 +22,34 @@ __all__ = ["MethodContext", "MethodOutput", "MethodRecord", "Updates", "get", "n
 
 def method_context(scenario, name: str, vehicle, seed: np.random.SeedSequence, record=None) -> MethodContext:
     """What method ``name`` is given for one run: observations, map, updates, rng, options."""
-    from tanbench.methods.api import method_view
     from tanbench.terrain import navigation_map
 
     record = record or get(name)
     nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
     check_start_on_map(scenario, nmap)
-    return MethodContext(name=name, scenario=method_view(scenario), obs=vehicle.obs, nmap=nmap,
-                         updates=update_indices(scenario, vehicle.obs), rng=np.random.default_rng(seed),
+    obs, nmap = method_inputs(vehicle.obs, nmap)
+    return MethodContext(name=name, scenario=method_view(scenario), obs=obs, nmap=nmap,
+                         updates=update_indices(scenario, obs), rng=np.random.default_rng(seed),
                          options=record.parse_options(scenario))
 
 
 def run_method(scenario, name: str, vehicle, seed: np.random.SeedSequence):
-    """Run method ``name`` on one run's ``vehicle`` data with its filter ``seed``; score it."""
-    from tanbench.methods.api import as_output
+    """Run method ``name`` on one run's ``vehicle`` data with its filter ``seed``; score it.
+
+    A method that writes into its (read-only) inputs fails with a one-line error naming it.
+    """
     from tanbench.scoring import score
 
     record = get(name)
     ctx = method_context(scenario, name, vehicle, seed, record)
     started = time.perf_counter()
-    raw = record.run(ctx)
+    try:
+        raw = record.run(ctx)
+    except Exception as exc:  # noqa: BLE001 - re-raised, reworded when it is a write into the inputs
+        reworded = input_write_error(name, exc)
+        if reworded is None:
+            raise
+        raise reworded from None
     wall = time.perf_counter() - started
     out = as_output(name, raw, ctx.updates.size)
     return score(scenario, vehicle, ctx.updates, out, wall, name)
