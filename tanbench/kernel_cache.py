@@ -94,8 +94,14 @@ def cache_dir() -> Path:
 
 
 def use_kernel_cache() -> Path:
-    """Point numba's cache at :func:`cache_dir` (for this process and the processes it starts)."""
+    """Point numba's cache at :func:`cache_dir` (for this process and the processes it starts);
+    under the default parent if the user's ``NUMBA_CACHE_DIR`` cannot hold it (numba would then
+    fall back to caching beside the sources, where a stale kernel could be loaded)."""
     path = cache_dir()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        path = _default_parent() / path.name
     os.environ["NUMBA_CACHE_DIR"] = str(path)
     config = sys.modules.get("numba.core.config")
     if config is not None:  # numba was imported before tanbench: it has read the variable already
