@@ -125,8 +125,8 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     plan = make_plan(sweep, out, state, workers, series, force=force)
     missing = state.missing_series(plan.tasks) if series != "none" and not force else 0
     if missing:
-        note(f"note: {missing} stored run(s) have no series file (deleted, or run with --series none): "
-             f"recomputing them")
+        note(f"note: {missing} stored run(s) have no series file here (deleted, run with --series none, or a "
+             f"clone of committed results): recomputing them, so that the series summary covers every run")
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
     todo = plan.todo
     if not todo:  # with tasks to run, sweep.yaml is written once the executor is up (a scheduler that
