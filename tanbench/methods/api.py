@@ -34,7 +34,7 @@ import numpy as np
 
 from tanbench.config import Scenario
 from tanbench.errors import TanbenchError, describe_exception
-from tanbench.simulation import NavSolution, Observations
+from tanbench.simulation import NavSolution, Observations, motion_plan
 from tanbench.terrain.grid import Map
 
 
@@ -223,8 +223,6 @@ def check_start_on_map(scenario: Scenario, nmap: Map) -> None:
     the initial position error on each axis, and the filter's initial square of side
     ``filter.initial_area_m`` is centred on it.
     """
-    from tanbench.simulation import motion_plan
-
     start = motion_plan(scenario).start_enu
     reach = scenario.navigation.initial_position_error_m / 2.0 + scenario.filter.initial_area_m / 2.0
     e = np.array([start[0] - reach, start[0] + reach])

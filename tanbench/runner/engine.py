@@ -16,6 +16,7 @@ step), :mod:`~tanbench.runner.plan` (tasks and their cost), :mod:`~tanbench.runn
 
 from __future__ import annotations
 
+import datetime as _dt
 import json
 import os
 import sys
@@ -25,16 +26,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
+from tqdm import tqdm
 
-from tanbench import kernel_cache, store
+from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
 from tanbench.errors import describe_exception
+from tanbench.runner.executors import open_executor, warm_up
 from tanbench.runner.plan import Plan, check_series_mode, make_plan
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.runner.validate import check_output, validate_sweep
 from tanbench.schema import METRIC_COLUMNS, rows_table
+from tanbench.simulation import PRELOAD_WORLDS_MAX, noise_free_world
 from tanbench.sweep import Sweep
+from tanbench.terrain import sweep_truth_maps
 
 MAX_POOL_STARTS = 3  # worker pools started for one session: the first, and two more after a worker died
 
@@ -111,7 +116,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
 
     ``note`` prints what the sweep will recompute and why (stderr by default).
     """
-    from tanbench.results import build_outputs
+    from tanbench.results import build_outputs  # the results layer sits above the runner
 
     check_series_mode(series)
     validate_sweep(sweep)
@@ -145,10 +150,6 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
 
 def log_session(out: Path, report: RunReport, plan: Plan, scheduler) -> None:
     """Append this session's wall time and counts to ``DIR/sessions.jsonl`` (for reports)."""
-    import datetime as _dt
-
-    from tanbench import __version__
-
     entry = {
         "started": (_dt.datetime.now(_dt.timezone.utc) - _dt.timedelta(seconds=report.wall_s)).isoformat(
             timespec="seconds"),
@@ -168,9 +169,6 @@ def shared_inputs(sweep: Sweep) -> tuple[dict, dict]:
     maps (file and synthetic) and, for a sweep of at most ``PRELOAD_WORLDS_MAX`` worlds,
     their noise-free simulations (all built already by ``validate_worlds`` in this
     process). Identical to what a worker would build, so results do not change."""
-    from tanbench.simulation import PRELOAD_WORLDS_MAX, noise_free_world
-    from tanbench.terrain import sweep_truth_maps
-
     maps = sweep_truth_maps(c.scenario.terrain for c in sweep.cells)
     worlds = sorted({json.dumps(c.scenario.world_spec(), sort_keys=True) for c in sweep.cells})
     shared_worlds = {w: noise_free_world(w) for w in worlds} if len(worlds) <= PRELOAD_WORLDS_MAX else {}
@@ -181,8 +179,6 @@ def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note) -> None:
     """Compile every kernel here, into numba's on-disk cache, unless it holds them
     (:func:`tanbench.kernel_cache.is_warm`, the rule of ``plan``'s estimate too), so that
     the workers only load them (a progress bar at 0 % for a minute would look like a hang)."""
-    from tanbench.runner.executors import warm_up
-
     if kernel_cache.is_warm():
         return
     guess = plan.estimate_parts(todo, warm=False)["compile"]
@@ -199,10 +195,6 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
              report: RunReport, note) -> None:
     """Run ``todo`` on the executor, storing each finished task; tasks a dead worker took with it
     run again in a new pool (at most :data:`MAX_POOL_STARTS` pools), else are left to a rerun."""
-    from tqdm import tqdm
-
-    from tanbench.runner.executors import open_executor
-
     columns = cell_columns(plan.sweep)
     n_methods = len(plan.sweep.spec.methods)
     workers = min(plan.workers, len(todo)) if scheduler is None else plan.workers

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
+import yaml
 
 from tanbench import store
 from tanbench.errors import TanbenchError
@@ -31,12 +32,11 @@ from tanbench.methods.registry import get
 from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed, seed_number
 from tanbench.runner.tasks import Task
 from tanbench.sweep import Sweep
+from tanbench.terrain.files import terrain_content_hash
 
 
 def terrain_hashes(sweep: Sweep) -> dict[str, str]:
     """Per cell with a file terrain: the content hash of its map files (each file hashed once)."""
-    from tanbench.terrain.files import terrain_content_hash
-
     by_spec: dict[str, str | None] = {}
     out = {}
     for cell in sweep.cells:
@@ -216,8 +216,6 @@ def _with_stale(rows: pd.DataFrame, why) -> pd.DataFrame:
 def _owner(out: Path, rows: pd.DataFrame) -> tuple[str | None, str]:
     """The sweep ``out`` belongs to: ``sweep.yaml``'s name, else (a damaged or missing file)
     the sweep that wrote its newest run file."""
-    import yaml
-
     try:
         name = (yaml.safe_load((out / "sweep.yaml").read_text()) or {}).get("name")
         if isinstance(name, str):
