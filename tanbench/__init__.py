@@ -6,6 +6,10 @@ terrain -> vehicle and sensors -> navigation -> filters -> runner -> results.
 
 from importlib.metadata import PackageNotFoundError, version as _version
 
+from tanbench.kernel_cache import use_kernel_cache
+
+use_kernel_cache()  # before any kernel module is decorated: numba's cache keyed on the kernel sources
+
 try:
     __version__ = _version("tanbench")
 except PackageNotFoundError:  # running from a source tree without installation

@@ -8,6 +8,8 @@ error, 2 bad input, 130 interrupted.
 from __future__ import annotations
 
 import json
+import os
+import shlex
 import signal
 import sys
 from pathlib import Path
@@ -44,11 +46,23 @@ def _default_out(sweep) -> Path:
     return Path("results") / sweep.name
 
 
+def _out_path(out: Optional[str], sweep) -> Path:
+    """``--out`` as a path (default ``results/<name>``); an empty one is refused, not read as ``.``."""
+    if out is None:
+        return _default_out(sweep)
+    if not out.strip():
+        raise TanbenchError("--out '': give the results directory a name")
+    return Path(out)
+
+
 def _terminate_as_interrupt(signum, frame) -> None:
-    """SIGTERM (``kill PID``, a batch scheduler's stop) ends a sweep as Ctrl-C does: the finished
-    runs stay stored, the workers are stopped, and the resume hint is printed. Without this the
-    CLI would die at once and leave its worker processes running."""
+    """SIGTERM (``kill PID``, a batch scheduler's stop) and SIGHUP (the terminal closed) end a
+    sweep as Ctrl-C does: the finished runs stay stored, the workers are stopped, and the resume
+    hint is printed. Without this the CLI would die at once and leave its worker processes running."""
     raise KeyboardInterrupt
+
+
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 def _count(tasks: int, n_methods: int) -> str:
@@ -56,60 +70,110 @@ def _count(tasks: int, n_methods: int) -> str:
     return (f"{tasks} task{'s' if tasks != 1 else ''} ({tasks * n_methods} run{'s' if tasks * n_methods != 1 else ''})")
 
 
+def _resume_command(sweep_file: Path, out: Path, options: dict) -> str:
+    """The command that resumes a sweep: what selects its tasks, where their series go, and the
+    ``PYTHONPATH`` (a plug-in's) it ran with; quoted for a POSIX shell."""
+    words = ["tanbench", "run", str(sweep_file), "--out", str(out)]
+    for flag, value in options.items():
+        if value is True:
+            words.append(flag)
+        elif value not in (None, False):
+            words += [flag, str(value)]
+    command = " ".join(shlex.quote(w) for w in words)
+    path = os.environ.get("PYTHONPATH")
+    return f"PYTHONPATH={shlex.quote(path)} {command}" if path else command
+
+
+def _loaded(sweep_file: Path, runs: Optional[int]):
+    """The sweep file (with ``--runs``), and a warning line on stderr for a very large one."""
+    from tanbench.runner.plan import size_warning
+    from tanbench.sweep import load_sweep
+
+    sweep = load_sweep(sweep_file)
+    if runs is not None:
+        sweep = sweep.with_runs(runs)
+    warning = size_warning(sweep)
+    if warning:
+        typer.echo(warning, err=True)
+    return sweep
+
+
+def _err(line: str) -> None:
+    """A line on stderr, if there is still a terminal to write it to (SIGHUP)."""
+    try:
+        typer.echo(line, err=True)
+    except OSError:
+        pass
+
+
 @app.command(help="Run (or resume) a sweep: every cell x method x Monte Carlo run, into Parquet."
              + EXAMPLE.format("tanbench run configs/quick.yaml --workers 2"))
 def run(
     sweep_file: Path = typer.Argument(..., help="Sweep YAML file."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/<name>]."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", metavar="DIR",
+                                      help="Results directory [default: results/<name>]."),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1,
                                           help="Worker processes [default: the cores available]."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler",
                                             help="Dask scheduler address (tcp://host:8786) or 'local-dask'."),
     runs: Optional[int] = typer.Option(None, "--runs", min=1, help="Override the sweep's runs per cell."),
-    force: bool = typer.Option(False, "--force", help="Recompute the sweep's runs 0..runs-1 even if stored; "
-                               "stored runs outside that range are kept."),
-    add: bool = typer.Option(False, "--add", help="Add to a results directory that holds another sweep's runs."),
+    force: bool = typer.Option(False, "--force", help="Recompute the sweep's runs 0..runs-1 even if stored, and "
+                               "any stored run that would come out differently now; other stored runs are kept."),
+    add: bool = typer.Option(False, "--add", help="Add to a results directory that holds another sweep's runs "
+                             "(made with the same root seed)."),
     series: str = typer.Option("summary", "--series", help="Per-update series to keep: none, summary or full."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ):
     from tanbench.results import to_markdown
-    from tanbench.runner.engine import run_sweep
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.runner.engine import MAX_POOL_STARTS, run_sweep
 
-    sweep = load_sweep(sweep_file)
-    if runs is not None:
-        sweep = sweep.with_runs(runs)
-    out = out or _default_out(sweep)
-    # the resume command repeats what selects the tasks and where their series go
-    again = f"tanbench run {sweep_file} --out {out}" + "".join(
-        f" {flag} {value}" for flag, value in (("--workers", workers), ("--scheduler", scheduler), ("--runs", runs))
-        if value is not None) + (f" --series {series}" if series != "summary" else "")
+    sweep = _loaded(sweep_file, runs)
+    out = _out_path(out, sweep)
+    again = _resume_command(sweep_file, out, {"--workers": workers, "--scheduler": scheduler, "--runs": runs,
+                                              "--series": series if series != "summary" else None,
+                                              "--add": add, "--force": force})
     n_m = len(sweep.spec.methods)
-    on_term = signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+    before = {sig: signal.signal(sig, _terminate_as_interrupt) for sig in STOP_SIGNALS}
     try:
         report = run_sweep(sweep, out, workers=workers, scheduler=scheduler, series=series, force=force, add=add,
-                           progress=not quiet, echo=typer.echo)
+                           progress=not quiet, echo=typer.echo, note=_err)
     except KeyboardInterrupt:  # before the tasks (validation) or after them (tables): nothing half-done
-        typer.echo(f"interrupted; resume with: {again}", err=True)
+        _err(f"interrupted; resume with: {again}")
         raise typer.Exit(130) from None
     finally:
-        signal.signal(signal.SIGTERM, on_term)
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
     if report.interrupted:
-        typer.echo(f"interrupted: {_count(report.finished, n_m)} finished in this session are stored in {out}; "
-                   f"resume with: {again}", err=True)
+        _err(f"interrupted: {_count(report.finished, n_m)} finished in this session are stored in {out}; "
+             f"resume with: {again}")
         raise typer.Exit(130)
     typer.echo(f"{sweep.name}: {_count(report.finished, n_m)} run, {_count(report.skipped, n_m)} already done, "
                f"{report.wall_s:.1f} s; results in {out}")
-    from tanbench.results import load, sweep_tables
-
-    tables = sweep_tables(load(out), sweep)
-    for name, table in tables.items():
+    for name, table in report.tables.items():
         typer.echo(to_markdown(_compact(table), title=name))
     if report.failed_rows:
         for line in report.errors[:10]:
             typer.echo(f"failed: {line}", err=True)
         typer.echo(f"{report.failed_rows} run(s) failed (recorded with their errors; rerun to retry)", err=True)
+    if report.lost:
+        typer.echo(f"{_count(report.lost, n_m)} left unfinished: worker processes ended abruptly "
+                   f"{MAX_POOL_STARTS} times ({report.lost_reason}); nothing of them is stored; rerun to retry: "
+                   f"{again}", err=True)
+    if report.failed_rows or report.lost:
         raise typer.Exit(1)
+
+
+def _warn_incomplete(sweep, directory: Path) -> None:
+    """One line on stderr naming the cells whose stored runs are not whole, and the command that completes them."""
+    from tanbench.runner.resume import incomplete_cells
+
+    missing = incomplete_cells(sweep, directory)
+    if missing:
+        cell, what = next(iter(missing.items()))
+        more = f" and {len(missing) - 1} more cell(s)" if len(missing) > 1 else ""
+        command = _resume_command(directory / "sweep.yaml", directory, {})
+        typer.echo(f"warning: incomplete results: cell {cell} ({what}){more}; recompute what is missing with: "
+                   f"{command}", err=True)
 
 
 def _compact(table):
@@ -122,55 +186,64 @@ def _compact(table):
              + EXAMPLE.format("tanbench plan configs/zhou2017.yaml"))
 def plan(
     sweep_file: Path = typer.Argument(..., help="Sweep YAML file."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/<name>]."),
+    out: Optional[str] = typer.Option(None, "--out", "-o", metavar="DIR",
+                                      help="Results directory [default: results/<name>]."),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1,
                                           help="Worker processes to plan for [default: the cores available]."),
     runs: Optional[int] = typer.Option(None, "--runs", min=1,
                                        help="Override the sweep's runs per cell [default: the sweep's runs]."),
 ):
-    from tanbench.runner.engine import current_load, default_workers, make_plan, numba_cache_is_warm, task_cost
-    from tanbench.runner.sweep import load_sweep
+    from collections import Counter
 
-    sweep = load_sweep(sweep_file)
-    if runs is not None:
-        sweep = sweep.with_runs(runs)
-    out = out or _default_out(sweep)
-    p = make_plan(sweep, out, workers)
+    from tanbench import kernel_cache
+    from tanbench.runner.plan import current_load, default_workers, make_plan
+    from tanbench.runner.resume import ResumeState
+    from tanbench.runner.validate import check_methods
+
+    sweep = _loaded(sweep_file, runs)
+    check_methods(sweep)
+    out = _out_path(out, sweep)
+    p = make_plan(sweep, out, ResumeState.read(sweep, out), workers)
     n_m = len(sweep.spec.methods)
     typer.echo(f"sweep {sweep.name}: {len(sweep.cells)} cell(s) x {n_m} method(s) x {sweep.spec.runs} run(s) "
                f"= {len(sweep.cells) * n_m * sweep.spec.runs} runs in {len(p.tasks)} task(s) (a task: one run "
                f"of a cell with every method)")
+    done = Counter(cell for cell, run in p.done if run < sweep.spec.runs)
     for cell in sweep.cells:
-        done = sum(1 for t in p.tasks if t.cell_id == cell.cell_id and t.key in p.done)
         varied = ", ".join(f"{k}={v}" for k, v in cell.varied.items()) or "defaults"
-        cost = sum(task_cost(t) for t in p.tasks if t.cell_id == cell.cell_id)
-        typer.echo(f"  {cell.cell_id}  [{', '.join(cell.tables)}]  {varied}: {done}/{sweep.spec.runs} done, "
-                   f"~{cost:.0f} core-s")
+        typer.echo(f"  {cell.cell_id}  [{', '.join(cell.tables)}]  {varied}: {done[cell.cell_id]}/{sweep.spec.runs} "
+                   f"done, ~{p.costs[cell.cell_id] * sweep.spec.runs:.0f} core-s")
     todo = p.todo
     if not todo:
         typer.echo(f"to do: nothing, every task is stored in {out} ({_count(0, n_m)} left)")
         return
-    parts = p.estimate_parts()
+    warm = kernel_cache.is_warm()
+    parts = p.estimate_parts(warm=warm)
     start = (f"{parts['compile']:.0f} s compiling the numba kernels (cold cache) and starting workers"
-             if not numba_cache_is_warm() else f"{parts['compile']:.0f} s starting workers (kernels cached)")
+             if not warm else f"{parts['compile']:.0f} s starting workers (kernels cached)")
     typer.echo(f"to do: {_count(len(todo), n_m)}, about {sum(parts.values()):.0f} s on {min(p.workers, max(1, len(todo)))} "
                f"worker(s) ({start}, {parts['tasks']:.0f} s running, {parts['fixed']:.0f} s around; "
                f"load average {current_load():.1f} on {default_workers()} core(s)); results in {out}")
 
 
-@app.command(help="Validate a sweep file (keys, types, values, terrain, track, initial uncertainty)."
+@app.command(help="Validate a sweep file: keys, types, values, methods and their options, terrain, track, "
+                  "sonar, memory, initial uncertainty (everything `run` checks before its first task)."
              + EXAMPLE.format("tanbench validate configs/zhou2017.yaml"))
 def validate(sweep_file: Path = typer.Argument(..., help="Sweep YAML file.")):
-    from tanbench.runner.engine import validate_worlds
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.profiles import describe_profile, profile_settings
+    from tanbench.config import flatten
+    from tanbench.runner.validate import validate_sweep
 
-    from tanbench.profiles import describe_profile
-
-    sweep = load_sweep(sweep_file)
-    validate_worlds(sweep)
+    sweep = _loaded(sweep_file, None)
+    validate_sweep(sweep)
     if sweep.spec.profile is not None:
         for line in describe_profile(sweep.spec.profile):
             typer.echo(line)
+        given = flatten(sweep.spec.scenario)
+        for key, value in profile_settings(sweep.spec.profile).items():
+            if key in given and given[key] != value:
+                typer.echo(f"  overridden by the sweep's scenario: {key} = {given[key]!r} (the profile's "
+                           f"{value!r} is not used)")
     typer.echo(f"{sweep_file}: ok ({len(sweep.cells)} cell(s), {len(sweep.spec.methods)} method(s), "
                f"{sweep.spec.runs} run(s) per cell)")
 
@@ -206,12 +279,13 @@ def tables(
     compare_paper: bool = typer.Option(False, "--compare-paper", help="Beside the paper's published values."),
 ):
     from tanbench.results import load, sweep_tables, to_markdown
-    from tanbench.runner.sweep import load_results_sweep
+    from tanbench.sweep import load_results_sweep
 
     if fmt not in ("md", "csv"):
         raise TanbenchError(f"--format must be md or csv, not {fmt!r}")
     sweep = load_results_sweep(directory)
     result = sweep_tables(load(directory), sweep)
+    _warn_incomplete(sweep, directory)
     if not result:
         raise TanbenchError(f"{directory}: no runs of the cells of {directory / 'sweep.yaml'} are stored "
                             f"(run the sweep first)")
@@ -256,7 +330,7 @@ def simulate(
     from pydantic import ValidationError
 
     from tanbench.config import Scenario
-    from tanbench.runner.sweep import format_validation_error
+    from tanbench.config import format_validation_error
     from tanbench.simulation import motion_plan, simulate_vehicle, vehicle_frame
 
     if area is not None and area not in ("A", "B", "vehicle"):
@@ -272,7 +346,7 @@ def simulate(
     if lonlat and log is None:
         raise TanbenchError("--lonlat applies to the mission log: give --log DIR")
     if sweep_file is not None:
-        from tanbench.runner.sweep import load_sweep
+        from tanbench.sweep import load_sweep
 
         base = load_sweep(sweep_file).cells[0].scenario.normalized()
         label = f"{sweep_file}"
@@ -388,7 +462,7 @@ def terrain_stats(
     if fmt not in ("md", "csv", "json"):
         raise TanbenchError(f"--format must be md, csv or json, not {fmt!r}")
     if sweep_file is not None:
-        from tanbench.runner.sweep import load_sweep
+        from tanbench.sweep import load_sweep
 
         scenarios = [c.scenario for c in load_sweep(sweep_file).cells]
     else:
@@ -587,7 +661,7 @@ def anatomy(directory: Path = typer.Argument(..., help="Results directory of an 
     from tanbench.anatomy import anatomy_markdown, anatomy_table
     from tanbench.results import load
     from tanbench import store
-    from tanbench.runner.sweep import load_results_sweep
+    from tanbench.sweep import load_results_sweep
 
     table = anatomy_table(load(directory), load_results_sweep(directory))
     if table.empty:
@@ -659,6 +733,13 @@ def main():
             raise
         typer.echo("interrupted", err=True)
         sys.exit(130)
+    except (MemoryError, RecursionError) as exc:
+        if debug:
+            raise
+        what = "out of memory" if isinstance(exc, MemoryError) else "input nested too deeply"
+        typer.echo(f"error: {what} ({type(exc).__name__}); check the sizes in the sweep (durations, grids, "
+                   f"particles, maps) (run with --debug for the traceback)", err=True)
+        sys.exit(2)
     except typer.Abort:
         typer.echo("aborted", err=True)
         sys.exit(1)

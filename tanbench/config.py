@@ -28,7 +28,7 @@ import types
 import typing
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD, LIKELIHOOD_R,
                               LOOSE_ARCHITECTURE, PROPAGATION, REGULARISATION, REGULARISED_STATES, RESAMPLING,
@@ -96,6 +96,29 @@ def plain_number_check(model: type[BaseModel], value, field_name: str):
 NON_FINITE_OK = {"nodata"}
 
 
+def _short_repr(value, limit: int = 80) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit - 20]}... ({len(text)} characters)"
+
+
+def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
+    """The first pydantic error of a spec as one line: 'key.path: message (got value)'."""
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err["loc"])
+    loc = f"{prefix}{loc}" if loc else prefix.rstrip(".")
+    msg = err["msg"]
+    if err["type"] == "extra_forbidden":
+        msg = "unknown key"
+    elif msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    got = err.get("input")
+    shown = "" if err["type"] in ("extra_forbidden", "missing") or isinstance(got, (dict, list)) else \
+        f" (got {_short_repr(got)})"
+    more = len(exc.errors()) - 1
+    tail = f"; and {more} more problem{'s' if more > 1 else ''}" if more else ""
+    return " ".join(f"{loc}: {msg}{shown}{tail}".split()) if loc else " ".join(f"{msg}{shown}{tail}".split())
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -158,11 +181,27 @@ class TerrainSpec(_Strict):
             raise ValueError("terrain kind 'file' needs a 'path'")
         return self
 
+    @model_validator(mode="after")
+    def _settings_of_the_kind(self):
+        """A setting of the other kind of terrain would be ignored: refuse it."""
+        given = self.model_fields_set
+        other = FILE_ONLY if self.kind == "synthetic" else SYNTHETIC_ONLY
+        used = [k for k in other if k in given and getattr(self, k) != type(self).model_fields[k].default]
+        if used:
+            needs = "file" if self.kind == "synthetic" else "synthetic"
+            raise ValueError(f"{used[0]} applies to {needs} terrain only (kind: {needs}); this terrain is "
+                             f"{self.kind}, so it would be ignored: remove it or set kind: {needs}")
+        return self
+
     def resolved(self, area: str | None = None) -> "TerrainSpec":
         """This spec with a synthetic ``layout: auto`` resolved for ``area``."""
         if self.kind != "synthetic" or self.layout != "auto":
             return self
         return self.model_copy(update={"layout": "vehicle-run" if area == "vehicle" else "paper"})
+
+
+FILE_ONLY = ("path", "format", "bounds", "origin", "resolution", "rows", "crs", "nodata", "positive", "fill_holes")
+SYNTHETIC_ONLY = ("layout", "truth_resolution_m", "region_hurst", "region_corner_m")
 
 
 class TrajectorySpec(_Strict):
@@ -190,16 +229,17 @@ class SensorSpec(_Strict):
     grade: Literal["auto", "table1", "table8"] = "auto"
     imu_rate_hz: float = Field(100.0, gt=0, le=1000)
     latitude_deg: float = Field(30.0, ge=-80, le=80)
-    gyro_turn_on_bias_deg_h: float | None = Field(None, ge=0)
-    gyro_bias_instability_deg_h: float | None = Field(None, ge=0)
+    # upper bounds: far beyond any navigation sensor (a gyro drifting 10 deg/s, an accelerometer off by 1 g)
+    gyro_turn_on_bias_deg_h: float | None = Field(None, ge=0, le=36000)
+    gyro_bias_instability_deg_h: float | None = Field(None, ge=0, le=36000)
     gyro_bias_corr_time_s: float = Field(300.0, gt=0)
-    gyro_arw_deg_sqrt_h: float | None = Field(None, ge=0)
-    accel_turn_on_bias_mg: float | None = Field(None, ge=0)
-    accel_bias_instability_mg: float | None = Field(None, ge=0)
+    gyro_arw_deg_sqrt_h: float | None = Field(None, ge=0, le=100)
+    accel_turn_on_bias_mg: float | None = Field(None, ge=0, le=1000)
+    accel_bias_instability_mg: float | None = Field(None, ge=0, le=1000)
     accel_bias_corr_time_s: float = Field(300.0, gt=0)
-    accel_noise_mg_sqrt_hz: float | None = Field(None, ge=0)
+    accel_noise_mg_sqrt_hz: float | None = Field(None, ge=0, le=100)
     dvl_scale_error: float = Field(0.004, ge=0, lt=0.5)
-    dvl_noise_mps: float = Field(0.002, ge=0)
+    dvl_noise_mps: float = Field(0.002, ge=0, le=5)
     beam_tilt_deg: float = Field(30.0, gt=0, lt=60)
     beam_azimuths_deg: tuple[float, ...] = Field((0.0, 90.0, 180.0, 270.0), min_length=1)
     dvl_beamwidth_deg: float = Field(4.0, ge=0, lt=30)
@@ -207,8 +247,15 @@ class SensorSpec(_Strict):
     beam_footprint: bool = Field(False, description="model the beam width (first return in the cone)")
     sonar_rate_hz: float = Field(1.0, gt=0, le=20)
     max_range_m: float = Field(200.0, gt=0)
-    pressure_error_percent: float = Field(0.01, ge=0)
+    pressure_error_percent: float = Field(0.01, ge=0, le=100)
     pressure_full_scale_m: float = Field(200.0, gt=0)
+
+    @model_validator(mode="after")
+    def _a_ping_at_an_imu_sample(self):
+        if self.imu_rate_hz < self.sonar_rate_hz:
+            raise ValueError(f"imu_rate_hz ({self.imu_rate_hz:g}) must be at least sonar_rate_hz "
+                             f"({self.sonar_rate_hz:g}): every sonar ping is taken at an IMU sample")
+        return self
 
     def resolved(self, default_grade: str) -> "SensorSpec":
         """This spec with ``grade: auto`` replaced and unset error figures taken from the grade."""
@@ -315,8 +362,9 @@ class FilterSpec(_Strict):
 class FaultSpec(_Strict):
     """Everyday faults of the world (docs/model.md, Section 4.1); all off in the paper's world."""
 
-    tide_bias_m: float = Field(0.0, description="constant error of the depth reference (tide, datum), m")
-    tide_amplitude_m: float = Field(0.0, ge=0, description="amplitude of the slow sinusoidal tide, m")
+    tide_bias_m: float = Field(0.0, ge=-100, le=100,
+                               description="constant error of the depth reference (tide, datum), m")
+    tide_amplitude_m: float = Field(0.0, ge=0, le=20, description="amplitude of the slow sinusoidal tide, m")
     tide_period_s: float = Field(44712.0, gt=0, description="tide period (M2: 12.42 h)")
     current_east_mps: float = Field(0.0, ge=-3, le=3, description="ocean current, east component, m/s")
     current_north_mps: float = Field(0.0, ge=-3, le=3, description="ocean current, north component, m/s")

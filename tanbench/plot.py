@@ -90,7 +90,7 @@ def plot_results(directory, cells: list[str] | None = None) -> list[Path]:
     returns the files written."""
     plt = _pyplot()
     from tanbench.results import load_series
-    from tanbench.runner.sweep import load_results_sweep
+    from tanbench.sweep import load_results_sweep
 
     directory = Path(directory)
     sweep = load_results_sweep(directory)

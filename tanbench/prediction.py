@@ -37,7 +37,7 @@ def cell_table(directory) -> pd.DataFrame:
     """Predictors and outcomes of every (cell, method) with successful runs in ``directory``."""
     from tanbench.bounds.pcrb import method_bound, method_bound_spec
     from tanbench.results import load, summarize
-    from tanbench.runner.sweep import load_results_sweep
+    from tanbench.sweep import load_results_sweep
 
     directory = Path(directory)
     sweep = load_results_sweep(directory)

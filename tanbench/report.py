@@ -168,7 +168,7 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
     from tanbench.paper import compare_with_paper
     from tanbench.results import load, load_series, sweep_tables
     from tanbench import store
-    from tanbench.runner.sweep import load_results_sweep
+    from tanbench.sweep import load_results_sweep
 
     directory = Path(directory)
     sweep = load_results_sweep(directory)

@@ -245,12 +245,25 @@ def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
     ids = {c.cell_id for c in sweep.cells}
     if series != "none":
-        frames = []
-        for f in _files(store.series_dir(out, series == "full"), "cell_id=*/run-*.parquet"):
-            if store.cell_of(f) in ids:
-                frames.append(store.read_parquet(f).assign(cell_id=store.cell_of(f)))
-        if frames:
-            store.write_parquet(series_summary(frames), out / "series" / "summary.parquet", meta)
+        # each run's series file, from either series directory (this mode's first); a cell
+        # with none here keeps its rows of the summary already written (a clone of committed
+        # results holds the summary only), so that no cell drops out of it
+        files = {}
+        for full in (series != "full", series == "full"):
+            for f in _files(store.series_dir(out, full), "cell_id=*/run-*.parquet"):
+                if store.cell_of(f) in ids:
+                    files[(store.cell_of(f), f.name)] = f
+        frames = [store.read_parquet(f).assign(cell_id=cell) for (cell, _), f in sorted(files.items())]
+        summary_path = out / "series" / "summary.parquet"
+        if frames and summary_path.exists():
+            kept = store.read_parquet(summary_path)
+            kept = kept[kept["cell_id"].isin(ids - {cell for cell, _ in files})]
+            summary = pd.concat([series_summary(frames), kept], ignore_index=True) if len(kept) else \
+                series_summary(frames)
+            store.write_parquet(summary.sort_values(["cell_id", "method", "t"], kind="stable")
+                                .reset_index(drop=True), summary_path, meta)
+        elif frames:
+            store.write_parquet(series_summary(frames), summary_path, meta)
     try:
         runs = load(out)
     except TanbenchError:

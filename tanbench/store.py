@@ -27,7 +27,6 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import os
-import shutil
 import subprocess
 from functools import lru_cache
 from pathlib import Path
@@ -117,14 +116,25 @@ def write_text(text: str, path: Path) -> None:
 
 
 def _write_atomically(path: Path, write) -> None:
-    """``write(binary file)`` into a temporary ``.<name>.<pid>.tmp``, synced, then renamed to ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """``write(binary file)`` into a temporary ``.<name>.<pid>.tmp``, synced, then renamed to ``path``.
+
+    A write that fails (a full disk, a file system that refuses the name) leaves no
+    temporary behind and is one :class:`TanbenchError` line naming the path."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
-        write(fh)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise TanbenchError(f"cannot write {path}: {exc.strerror or exc} (what was stored before is kept; "
+                            f"fix this and rerun to resume)") from None
 
 
 def read_meta(path: Path) -> dict:
@@ -132,8 +142,22 @@ def read_meta(path: Path) -> dict:
     try:
         schema = pq.read_schema(path)
     except (OSError, pa.ArrowException) as exc:
-        raise TanbenchError(f"{path}: not a readable Parquet file ({str(exc).splitlines()[0]})") from None
-    raw = (schema.metadata or {}).get(META_KEY)
+        raise TanbenchError(f"{path}: not a readable Parquet file ({_first_line(exc)}); {RECOVERY}") from None
+    return _checked_meta(path, schema.metadata)
+
+
+RECOVERY = ("`tanbench run` of the directory's sweep into it sets a damaged run or series file aside and "
+            "recomputes its runs")
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _checked_meta(path: Path, metadata) -> dict:
+    """The tanbench metadata of a file's key-value ``metadata``, of this schema (one error line otherwise)."""
+    raw = (metadata or {}).get(META_KEY)
     try:
         meta = json.loads(raw) if raw is not None else None
     except ValueError:
@@ -163,7 +187,7 @@ def read_parquet(path: Path, columns=None) -> pd.DataFrame:
     try:
         return pq.read_table(path, columns=columns).to_pandas()
     except (OSError, pa.ArrowException) as exc:
-        raise TanbenchError(f"{path}: corrupt Parquet file ({str(exc).splitlines()[0]})") from None
+        raise TanbenchError(f"{path}: corrupt Parquet file ({_first_line(exc)}); {RECOVERY}") from None
 
 
 PARTITION = "cell_id"
@@ -193,8 +217,80 @@ def series_file(out: Path, cell_id: str, run: int, full: bool) -> Path:
 
 
 def run_files(out: Path) -> list[Path]:
-    """Every stored runs file: per-task ``run-*.parquet`` and per-cell ``runs.parquet``."""
-    return sorted(p for p in (out / "runs").glob(f"{PARTITION}=*/*.parquet") if not p.name.startswith("."))
+    """Every stored runs file, per cell the merged ``runs.parquet`` first, then the per-task
+    ``run-*.parquet`` written since (newer rows last, as :func:`compact_cells` merges them)."""
+    files = [p for p in (out / "runs").glob(f"{PARTITION}=*/*.parquet") if not p.name.startswith(".")]
+    return sorted(files, key=lambda p: (p.parent.name, p.name != "runs.parquet", p.name))
+
+
+MERGED_RUNS = "runs.parquet"
+# run-file metadata: the content hash of a file terrain's maps, and each user method's code identity
+TERRAIN_META = "terrain_sha256"
+CODE_META = "method_code"
+IDENTITY_COLUMNS = ["run", "method", "seed", "filter_seed", "status", "sweep"]
+RUN_INDEX_COLUMNS = ["cell_id", *IDENTITY_COLUMNS, "terrain", "code", "root_seed", "path", "mtime"]
+
+
+def read_run_index(out: Path) -> tuple[pd.DataFrame, list[tuple[Path, str]]]:
+    """One pass over every stored run file: the identity columns of its rows with what its
+    metadata says of them, and the files that cannot be read.
+
+    Columns: cell_id, the :data:`IDENTITY_COLUMNS`, ``terrain`` (the file's map hash or
+    None), ``code`` (the method's code identity in the file, None if not recorded),
+    ``root_seed``, ``path`` and ``mtime``. A row stored twice (a merged file and a task
+    file written since) is kept once, the newer. A file of another schema or not written
+    by tanbench is an error (:func:`read_meta`); an unreadable one is listed with why.
+    """
+    frames, damaged = [], []
+    for path in run_files(out):
+        try:
+            parquet = pq.ParquetFile(path)
+            meta = _checked_meta(path, parquet.metadata.metadata)
+            table = parquet.read(columns=[c for c in IDENTITY_COLUMNS if c in parquet.schema_arrow.names])
+        except (OSError, pa.ArrowException) as exc:
+            damaged.append((path, _first_line(exc)))
+            continue
+        df = table.to_pandas()
+        codes = meta.get(CODE_META) or {}
+        df.insert(0, "cell_id", cell_of(path))
+        df["terrain"] = meta.get(TERRAIN_META)
+        df["code"] = df["method"].map(lambda m, codes=codes: codes.get(m))
+        df["root_seed"] = meta.get("root_seed")
+        df["path"] = str(path)
+        df["mtime"] = path.stat().st_mtime
+        frames.append(df)
+    if not frames:
+        return pd.DataFrame(columns=RUN_INDEX_COLUMNS), damaged
+    rows = pd.concat(frames, ignore_index=True).reindex(columns=RUN_INDEX_COLUMNS)
+    return rows.drop_duplicates(subset=["cell_id", "method", "run"], keep="last").reset_index(drop=True), damaged
+
+
+def series_runs(out: Path, check: bool = False) -> tuple[set[tuple[str, int]], list[tuple[Path, str]]]:
+    """(cell, run) of every stored per-run series file, in either series directory; with
+    ``check``, only the readable ones, and the unreadable files with why."""
+    found, damaged = set(), []
+    for full in (False, True):
+        for path in series_dir(out, full).glob(f"{PARTITION}=*/run-*.parquet"):
+            if check:
+                try:
+                    pq.read_metadata(path)
+                except (OSError, pa.ArrowException) as exc:
+                    damaged.append((path, _first_line(exc)))
+                    continue
+            found.add((cell_of(path), int(path.stem.split("-", 1)[1])))
+    return found, damaged
+
+
+def set_aside(path: Path) -> Path:
+    """Rename a damaged file to ``.<name>.damaged`` (a free name): hidden, so out of every
+    reader's way (pyarrow's datasets skip names starting with a dot), kept for a look."""
+    target = path.with_name(f".{path.name}.damaged")
+    n = 1
+    while target.exists():
+        target = path.with_name(f".{path.name}.damaged.{n}")
+        n += 1
+    os.replace(path, target)
+    return target
 
 
 def compact_cells(out: Path, cell_ids) -> None:
@@ -210,12 +306,17 @@ def compact_cells(out: Path, cell_ids) -> None:
     for cell_id in cell_ids:
         directory = cell_dir(out / "runs", cell_id)
         parts = sorted(directory.glob("run-*.parquet"))
-        merged_path = directory / "runs.parquet"
+        merged_path = directory / MERGED_RUNS
         if not parts and (not merged_path.exists() or is_compact_format(merged_path)):
             continue
         sources = ([merged_path] if merged_path.exists() else []) + parts
         tables = [pq.read_table(p) for p in sources]
         meta = read_meta(sources[-1])
+        codes = {}
+        for p in sources:  # each user method's code identity, as of the newest file that ran it
+            codes.update(read_meta(p).get(CODE_META) or {})
+        if codes:
+            meta = {**meta, CODE_META: codes}
         table = pa.concat_tables([t.replace_schema_metadata(None) for t in tables], promote_options="default")
         df = table.to_pandas().drop_duplicates(subset=["method", "run"], keep="last")
         df = df.sort_values(["run", "method"], kind="stable").reset_index(drop=True)
@@ -265,68 +366,6 @@ def read_dataset(directory: Path) -> pd.DataFrame:
         raise TanbenchError(f"{directory}: cannot read the results ({str(exc).splitlines()[0]})") from None
 
 
-def stored_rows(out: Path, cell_ids=None) -> pd.DataFrame:
-    """The identity columns of every stored run row (of ``cell_ids``, default all): cell_id,
-    run, method, seed, filter_seed, status."""
-    wanted = None if cell_ids is None else set(cell_ids)
-    frames = []
-    for path in run_files(out):
-        cell = cell_of(path)
-        if wanted is not None and cell not in wanted:
-            continue
-        df = read_parquet(path, columns=["run", "method", "seed", "filter_seed", "status"])
-        df.insert(0, "cell_id", cell)
-        frames.append(df)
-    if not frames:
-        return pd.DataFrame(columns=["cell_id", "run", "method", "seed", "filter_seed", "status"])
-    df = pd.concat(frames, ignore_index=True)
-    return df.drop_duplicates(subset=["cell_id", "method", "run"], keep="last")
-
-
-def stored_terrain_hashes(out: Path, cell_ids) -> dict[str, set]:
-    """Per cell: the map-content hashes (``terrain_sha256``) its stored run files carry.
-
-    Runs stored before tanbench recorded the hash carry none and are not in the sets.
-    """
-    wanted = set(cell_ids)
-    out_hashes: dict[str, set] = {}
-    for path in run_files(out):
-        cell = cell_of(path)
-        if cell in wanted:
-            digest = read_meta(path).get("terrain_sha256")
-            if digest is not None:
-                out_hashes.setdefault(cell, set()).add(digest)
-    return out_hashes
-
-
-def completed_tasks(out: Path, expected: dict) -> set[tuple[str, int]]:
-    """(cell_id, run) of the tasks stored exactly as they would be computed now.
-
-    ``expected`` maps (cell_id, run) to ``{method: (seed, filter_seed)}``: a task is done
-    when every one of its methods has a row with status "ok" and the same seeds. A
-    method added to a sweep, or a root seed changed, thus leaves the task to do.
-    """
-    rows = stored_rows(out, {cell for cell, _ in expected})
-    have = {(r.cell_id, int(r.run), r.method): (r.status, int(r.seed), int(r.filter_seed))
-            for r in rows.itertuples(index=False) if r.status == "ok"}
-    done = set()
-    for key, methods in expected.items():
-        if all(have.get((*key, m), ("", -1, -1))[1:] == seeds for m, seeds in methods.items()):
-            done.add(key)
-    return done
-
-
-def stale_rows(out: Path, expected: dict) -> pd.DataFrame:
-    """Stored rows of the expected tasks and methods whose seeds differ from what they would be now."""
-    rows = stored_rows(out, {cell for cell, _ in expected})
-    if rows.empty:
-        return rows
-    want = [expected.get((r.cell_id, int(r.run)), {}).get(r.method) for r in rows.itertuples(index=False)]
-    stale = [w is not None and (int(r.seed), int(r.filter_seed)) != w
-             for w, r in zip(want, rows.itertuples(index=False))]
-    return rows[stale].reset_index(drop=True)
-
-
 def remove_stale_temporaries(out: Path) -> list[Path]:
     """Delete the temporary files (``.<name>.<pid>.tmp``, write probes) of killed writers.
 
@@ -374,18 +413,3 @@ def check_writable(out: Path) -> None:
         probe.unlink()
     except OSError as exc:
         raise TanbenchError(f"output directory {out} is not writable ({exc.strerror or exc})") from None
-
-
-def check_existing_schema(out: Path) -> None:
-    """Refuse to add to a results directory written with another schema."""
-    check_layout(out)
-    files = run_files(out)
-    if files:
-        read_meta(files[0])
-
-
-def remove_cells(out: Path, cell_ids) -> None:
-    """Delete every stored run and series of these cells (``--force`` on runs made with other seeds)."""
-    for cell_id in cell_ids:
-        for base in (out / "runs", series_dir(out, True), series_dir(out, False)):
-            shutil.rmtree(cell_dir(base, cell_id), ignore_errors=True)

@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 from tanbench.anatomy import anatomy_markdown, anatomy_table, difference_interval
-from tanbench.runner.sweep import parse_sweep
+from tanbench.sweep import parse_sweep
 
 SWEEP = """name: a
 seed: 1

@@ -138,8 +138,10 @@ def regular_file(tmp):
     return {"out": str(tmp / "a-file")}
 
 
-def case(id, args, data, *fragments, setup=None, max_s=None, code=2, then=None):
-    return pytest.param(args, data, fragments, setup, max_s, code, then, id=id)
+def case(id, args, data, *fragments, setup=None, max_s=None, code=2, then=None, absent=()):
+    """One row: CLI ``args``, the sweep file's ``data``, text the output must hold (``fragments``)
+    and must not (``absent``)."""
+    return pytest.param(args, data, fragments, setup, max_s, code, then, absent, id=id)
 
 
 def csv_header(expected):
@@ -345,6 +347,104 @@ CASES = [
 ]
 
 
+# ---- issue 25: everything a sweep file says is used or refused; validate is run's first step --------
+
+
+def fifo(tmp):
+    """A FIFO where the sweep file should be (reading it would block forever)."""
+    os.mkfifo(tmp / "fifo.yaml")
+    return {}
+
+
+def huge_sweep_file(tmp):
+    (tmp / "huge.yaml").write_text("name: bad\nseed: 1\nruns: 1\n" + "# padding\n" * 150_000)
+    return {}
+
+
+def damaged_sweep_yaml(tmp):
+    """The CI baseline whose sweep.yaml is binary junk (its run files still say whose they are)."""
+    values = stored_results(tmp)
+    (tmp / "out" / "sweep.yaml").write_bytes(bytes(range(256)) * 4)
+    return values
+
+
+ALIAS_BOMB = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join([f'*{chr(97 + i)}'] * 10)}]\n" for i in range(8)) + \
+    "name: bad\nseed: 1\nruns: 1\n"
+NESTED = "name: bad\nseed: 1\nruns: 1\nscenario: " + "[" * 5000 + "]" * 5000 + "\n"
+LONG_NAME = "t" * 300
+
+
+CASES += [
+    # method options: checked before any task, one line each
+    case("method-option-unknown", ["run", "{sweep}", "--out", "{tmp}/out"],
+         sweep(methods=["pmf-dvl"], scenario__method_options={"pmf-dvl": {"grid_m": 5}}),
+         "method_options.pmf-dvl.grid_m: unknown option of 'pmf-dvl' (known: cells, headings"),
+    case("method-option-out-of-range", ["validate", "{sweep}"],
+         sweep(methods=["pmf-dvl"], scenario__method_options={"pmf-dvl": {"cells": 2}}),
+         "method_options.pmf-dvl.cells: Input should be greater than or equal to 4 (got 2)"),
+    case("method-options-for-a-method-without-options", ["run", "{sweep}", "--out", "{tmp}/out"],
+         sweep(scenario__method_options={"tight-dvl": {"cells": 2}}),
+         "method_options.tight-dvl: method 'tight-dvl' takes no options"),
+    case("method-options-of-a-misspelt-method", ["validate", "{sweep}"],
+         sweep(methods=["pmf-dvl"], scenario__method_options={"pmf-dvk": {"cells": 16}}),
+         "method_options.pmf-dvk: unknown method 'pmf-dvk' (its methods: pmf-dvl)"),
+    case("method-options-of-an-absent-method", ["validate", "{sweep}"],
+         sweep(scenario__method_options={"pmf-dvl": {"cells": 16}}),
+         "method_options.pmf-dvl: options of method 'pmf-dvl', which this sweep does not run"),
+    # names that become files: the length too (every task computed, then refused at the end, before)
+    case("table-name-too-long", ["run", "{sweep}", "--out", "{out}"], sweep(tables={LONG_NAME: {"noise_m": [1.0]}}),
+         "tables: table name 'tttttttttttttttttttt'... is 300 characters long", setup=stored_results),
+    case("sweep-name-too-long", ["validate", "{sweep}"], sweep(name=LONG_NAME), "name: sweep name",
+         "is 300 characters long"),
+    # settings that would be ignored
+    case("map-path-on-synthetic-terrain", ["validate", "{sweep}"], sweep(scenario__terrain__path="map.npy"),
+         "scenario.terrain: path applies to file terrain only (kind: file); this terrain is synthetic"),
+    case("table-mapping-drops-scenario-settings", ["run", "{sweep}", "--out", "{out}"],
+         sweep(scenario__filter__ess_threshold=0.3, tables={"t": {"filter": [{"resampling": "residual"}]}}),
+         "tables.t: filter: this mapping replaces the whole filter section of the scenario and drops "
+         "filter.ess_threshold", setup=stored_results),
+    case("profile-setting-overridden-is-shown", ["validate", "{sweep}"],
+         sweep(profile="zhou2017-literal", scenario__filter__resampling="systematic"),
+         "overridden by the sweep's scenario: filter.resampling = 'systematic' (the profile's 'multinomial' "
+         "is not used)", "ok (1 cell(s)", code=0),
+    # impossible worlds
+    case("vehicle-above-the-surface", ["run", "{sweep}", "--out", "{tmp}/out"],
+         sweep(scenario__trajectory__start_enu_m=[1111.2, 400.0, 50.0]),
+         "the vehicle is above the sea surface at t=0 s (up +50.0 m)"),
+    case("sonar-range-leaves-no-measurement", ["validate", "{sweep}"], sweep(scenario__sensors__max_range_m=1),
+         "no sonar ping of the run has a bottom return from the DVL beams nor the altimeter",
+         "sensors.max_range_m=1 m"),
+    case("tide-bias-absurd", ["validate", "{sweep}"], sweep(scenario__faults__tide_bias_m=-1e6),
+         "scenario.faults.tide_bias_m: Input should be greater than or equal to -100"),
+    case("gyro-bias-absurd", ["validate", "{sweep}"], sweep(scenario__sensors__gyro_turn_on_bias_deg_h=1e9),
+         "scenario.sensors.gyro_turn_on_bias_deg_h: Input should be less than or equal to 36000"),
+    case("imu-slower-than-the-sonar", ["validate", "{sweep}"], sweep(scenario__sensors__imu_rate_hz=0.5),
+         "scenario.sensors: imu_rate_hz (0.5) must be at least sonar_rate_hz (1)"),
+    case("cruise-too-long-for-memory", ["validate", "{sweep}"],
+         sweep(scenario__duration_s=None, scenario__trajectory__cruise_s=1e7),
+         "a run lasts 10000350 s at sensors.imu_rate_hz=100 (1e+09 IMU samples): its vehicle data would take "
+         "about", "shorten the trajectory", max_s=120),
+    # the sweep file itself
+    case("sweep-file-is-a-fifo", ["validate", "{tmp}/fifo.yaml"], None, "fifo.yaml: not a regular file",
+         setup=fifo, max_s=60),
+    case("sweep-file-too-large", ["validate", "{tmp}/huge.yaml"], None, "is too large for a sweep file",
+         setup=huge_sweep_file),
+    case("yaml-alias-bomb", ["validate", "{sweep}"], ALIAS_BOMB, "the YAML's aliases (*name) expand to",
+         "an alias bomb?", max_s=60),
+    case("yaml-nested-too-deeply", ["validate", "{sweep}"], NESTED, "the YAML is nested too deeply"),
+    # results directories
+    case("out-empty", ["run", "{sweep}", "--out", ""], BASE, "--out '': give the results directory a name"),
+    case("out-inside-a-results-directory", ["run", "{sweep}", "--out", "{out}/runs/new"], BASE,
+         "is inside the results directory {tmp}/out", setup=stored_results),
+    case("add-with-another-root-seed", ["run", "{sweep}", "--out", "{out}", "--add"], sweep(name="other"),
+         "holds runs made with root seed 424242; sweep 'other' has root seed 1", "use another --out",
+         setup=stored_results, absent=("--force",)),
+    case("damaged-sweep-yaml-keeps-its-owner", ["run", "{sweep}", "--out", "{out}"], BASE,
+         "holds the results of sweep 'ci' (its sweep.yaml is damaged", "not 'bad'", setup=damaged_sweep_yaml),
+]
+
+
 # ---- map readers (issue 16): depth-positive grids, NetCDF grids without coordinates ----------
 
 
@@ -400,7 +500,7 @@ CASES += READER_CASES
 ], ids=["depth-positive-negated", "netcdf-origin-resolution"])
 def test_reader_inputs_accepted_as_documented(tmp_path, setup, changes):
     """The same maps with the documented option validate, and read as the seafloor they hold."""
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.sweep import load_sweep
     from tanbench.terrain import truth_map
 
     path = next(iter(setup(tmp_path).values()))
@@ -459,8 +559,8 @@ def snapshot(root: Path) -> dict[str, str]:
     return out
 
 
-@pytest.mark.parametrize("args, data, fragments, setup, max_s, code, then", CASES)
-def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, setup, max_s, code, then):
+@pytest.mark.parametrize("args, data, fragments, setup, max_s, code, then, absent", CASES)
+def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, setup, max_s, code, then, absent):
     """Bad input: one `error:` line naming the problem, exit 2, no traceback, nothing stored changed.
     (The cases with another ``code`` say what they print instead, on stdout or stderr.)"""
     argv = prepare(tmp_path, maps, args, data, setup)
@@ -480,6 +580,8 @@ def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, s
         text = proc.stdout + proc.stderr
     for fragment in fragments:
         assert fill(fragment, {"tmp": tmp_path}) in text, text[-3000:]
+    for fragment in absent:
+        assert fill(fragment, {"tmp": tmp_path}) not in text, text[-3000:]
     if then is None:  # nothing stored changed (the project's results/ included)
         assert snapshot(tmp_path) == before
     else:
@@ -534,3 +636,47 @@ def test_validate_refuses_what_run_refuses(tmp_path, maps, data):
     assert checked.returncode == ran.returncode == 2, (checked.stderr, ran.stderr)
     assert error_lines(checked.stderr) == error_lines(ran.stderr) and len(error_lines(ran.stderr)) == 1
     assert not list((tmp_path / "out").rglob("*.parquet"))
+
+
+# a full disk, as every write sees it: sitecustomize is imported by the CLI and its workers
+FULL_DISK = '''
+import errno
+import os
+
+
+def _full(fd):
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+os.fsync = _full
+'''
+
+
+def test_a_full_disk_is_one_line_naming_the_path(tmp_path, maps):
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(FULL_DISK)
+    argv = prepare(tmp_path, maps, ["run", "{sweep}", "--out", "{tmp}/out", "--workers", "1", "-q"], BASE, None)
+    proc = cli(*argv, extra_path=hook)
+    lines = error_lines(proc.stderr)
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"error: cannot write {tmp_path}/out/") and "No space left on device" in lines[0]
+    assert not [p for p in (tmp_path / "out").rglob("*") if p.is_file()]  # no half-written or temporary file
+
+
+def test_plan_is_linear_in_cells_and_warns_past_a_size(tmp_path, monkeypatch):
+    """`plan` costs each cell once (a task's cost depends only on its cell: it was computed per task, and
+    per cell by scanning every task, quadratic in cells); past LARGE_SWEEP_CELLS it warns."""
+    from tanbench.methods.registry import MethodRecord
+    from tanbench.runner import plan as planning
+    from tanbench.sweep import parse_sweep
+
+    cells = planning.LARGE_SWEEP_CELLS + 25
+    data = sweep(runs=3, grid={"particles": list(range(100, 100 + cells))})
+    swept = parse_sweep(yaml.safe_dump(data))
+    calls = []
+    real = MethodRecord.estimate_seconds
+    monkeypatch.setattr(MethodRecord, "estimate_seconds", lambda self, sc: calls.append(1) or real(self, sc))
+    made = planning.make_plan(swept, tmp_path / "out", workers=2)
+    assert len(made.tasks) == 3 * cells and len(calls) == cells * len(swept.spec.methods)
+    assert f"expands to {cells} cells" in planning.size_warning(swept)

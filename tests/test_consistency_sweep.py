@@ -33,7 +33,7 @@ tables:
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     from tanbench.runner.engine import run_sweep
-    from tanbench.runner.sweep import parse_sweep
+    from tanbench.sweep import parse_sweep
 
     out = tmp_path_factory.mktemp("overconfidence") / "res"
     run_sweep(parse_sweep(SWEEP), out, workers=1, progress=False, echo=lambda *a, **k: None)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 from pathlib import Path
@@ -10,8 +9,9 @@ from pathlib import Path
 import pytest
 
 from sweep_support import ROOT, cli
-from tanbench.runner import engine
-from tanbench.runner.sweep import load_sweep
+from tanbench import kernel_cache
+from tanbench.runner import plan as planning
+from tanbench.sweep import load_sweep
 
 COMMANDS = ["run", "plan", "validate", "tables", "simulate", "check", "plot", "report", "bench", "terrain stats"]
 
@@ -19,41 +19,43 @@ COMMANDS = ["run", "plan", "validate", "tables", "simulate", "check", "plot", "r
 def test_plan_estimate_includes_compilation_and_the_load():
     """Cold cache: compilation + worker start + tasks + fixed; a loaded machine scales every part by its core share."""
     sweep = load_sweep(ROOT / "configs" / "quick.yaml")
-    plan = engine.make_plan(sweep, Path("/nonexistent/results"), workers=2)
-    tasks = sum(engine.task_cost(t) for t in plan.tasks)
-    cores = engine.default_workers()
+    plan = planning.make_plan(sweep, Path("/nonexistent/results"), workers=2)
+    tasks = sum(plan.task_cost(t) for t in plan.tasks)
+    cores = planning.default_workers()
     workers = min(2, len(plan.tasks))
     idle = plan.estimate_parts(load=0.0, warm=False)
     share_one, share_all = min(1.0, cores / 1.0), min(1.0, cores / workers)
-    assert idle["compile"] == pytest.approx(engine.COMPILE_S / share_one + engine.WARM_START_S / share_all)
+    assert idle["compile"] == pytest.approx(planning.COMPILE_S / share_one + planning.WARM_START_S / share_all)
     assert idle["tasks"] == pytest.approx(tasks / (workers * share_all))
-    assert idle["fixed"] == pytest.approx(engine.FIXED_S / share_one)
+    assert idle["fixed"] == pytest.approx(planning.FIXED_S / share_one)
     warm = plan.estimate_parts(load=0.0, warm=True)
-    assert warm["compile"] == pytest.approx(engine.WARM_START_S / share_all)
+    assert warm["compile"] == pytest.approx(planning.WARM_START_S / share_all)
     busy = plan.estimate_parts(load=8.0, warm=False)
     assert busy["tasks"] == pytest.approx(tasks / (workers * min(1.0, cores / (8.0 + workers))))
     assert busy["compile"] > idle["compile"] and busy["fixed"] > idle["fixed"]
     assert plan.estimate_seconds() == pytest.approx(sum(plan.estimate_parts().values()), rel=0.5)
 
 
-def test_numba_cache_warm_only_when_every_index_is_newer_than_its_source(tmp_path, monkeypatch):
-    """No index: cold; indexes newer than the sources: warm; a source edited after its index: cold."""
-    sources = [tmp_path / "filters" / "tight.py", tmp_path / "navigation" / "ins.py", tmp_path / "filters" / "trig.py"]
-    for src in sources:
-        src.parent.mkdir(exist_ok=True)
-        src.write_text("@njit(cache=True)\ndef f(): pass\n")
-        os.utime(src, (1000, 1000))
-    monkeypatch.setattr(engine, "jit_modules", lambda: tuple(sources))
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-    assert not engine.numba_cache_is_warm()
-    for src in sources[:2]:  # trig.py's kernels are only called from other kernels: no index of its own
-        index = src.parent / "__pycache__" / f"{src.stem}.f-1.py311.nbi"
-        index.parent.mkdir(exist_ok=True)
-        index.write_bytes(b"")
-        os.utime(index, (2000, 2000))
-    assert engine.numba_cache_is_warm()
-    os.utime(sources[1], (3000, 3000))  # ins.py edited after it was compiled
-    assert not engine.numba_cache_is_warm()
+def test_kernel_cache_warm_only_with_the_main_kernels_of_these_sources(tmp_path, monkeypatch):
+    """The cache is warm when the directory named by today's kernel sources holds the main filter
+    module's index; another version's directory, or the old cache beside the sources, does not count.
+    (``plan``'s estimate and ``run``'s compile message both ask :func:`kernel_cache.is_warm`.)"""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert kernel_cache.cache_dir().parent == tmp_path
+    assert not kernel_cache.is_warm()
+    other = tmp_path / f"{kernel_cache.PREFIX}{'0' * 16}" / "x" / "filters"
+    other.mkdir(parents=True)
+    (other / "tight.tight_filter_loop-1.py311.nbi").write_bytes(b"")
+    assert not kernel_cache.is_warm()
+    mine = kernel_cache.cache_dir() / "x" / "filters"
+    mine.mkdir(parents=True)
+    (mine / "resample.exp_weights-1.py311.nbi").write_bytes(b"")
+    assert not kernel_cache.is_warm()
+    (mine / "tight.tight_filter_loop-1.py311.nbi").write_bytes(b"")
+    assert kernel_cache.is_warm()
+    # a child process handed this directory as NUMBA_CACHE_DIR takes its parent as the user's
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(kernel_cache.cache_dir()))
+    assert kernel_cache.cache_parent() == tmp_path
 
 
 @pytest.mark.parametrize("command", COMMANDS)

@@ -19,7 +19,7 @@ from pydantic import create_model
 from sweep_support import ROOT, cli, error_lines, sweep_dict, write_sweep
 from tanbench import results
 from tanbench.config import FilterSpec, Scenario, new_option
-from tanbench.runner.sweep import load_sweep
+from tanbench.sweep import load_sweep
 
 COMMITTED = sorted(p.parent for p in (ROOT / "results").glob("*/sweep.yaml"))
 
@@ -154,3 +154,81 @@ def test_an_edited_map_file_is_noticed_on_resume(tmp_path):
     assert forced.returncode == 0, forced.stderr
     again = cli("run", path, "--out", out, "--workers", 1, "-q")
     assert again.returncode == 0 and "0 tasks (0 runs) run" in again.stdout, again.stdout
+
+
+# ---- user methods: identity covers their code (issue 25) -------------------------------------------
+
+OFFSET_PLUGIN = '''"""A dead-reckoning plug-in whose estimate is offset east (the offset stands for an edit)."""
+
+OFFSET_M = {offset}
+
+
+def run(ctx):
+    pos = ctx.nav.pos[ctx.updates.imu]
+    return {{"east": pos[:, 0] + OFFSET_M, "north": pos[:, 1]}}
+'''
+VERSIONED_PLUGIN = OFFSET_PLUGIN + '''
+from tanbench.methods import MethodRecord  # noqa: E402
+
+METHOD = MethodRecord(name="versioned", seed_id=0, summary="offset dead reckoning", run=run, version={version!r})
+'''
+
+
+def plugin_sweep(tmp_path, method: str, offset: float, version: str | None = None, runs: int = 2):
+    """A package ``mine`` with the plug-in (written with ``offset``) and a 1-cell sweep naming it."""
+    package = tmp_path / "userland" / "mine"
+    package.mkdir(parents=True, exist_ok=True)
+    (package / "__init__.py").write_text("")
+    text = VERSIONED_PLUGIN.format(offset=offset, version=version) if version else OFFSET_PLUGIN.format(offset=offset)
+    (package / "plug.py").write_text(text)
+    return write_sweep(tmp_path / "s.yaml", sweep_dict(runs=runs, methods=[method], tables={}))
+
+
+def plugin_run(tmp_path, path, *args):
+    return cli("run", path, "--out", tmp_path / "out", "--workers", 1, "-q", *args, extra_path=tmp_path / "userland")
+
+
+def final_errors(out) -> list[float]:
+    return list(results.load(out).sort_values("run")["final_horizontal_error_m"])
+
+
+def test_a_plugin_whose_code_changed_is_recomputed_never_reused_or_pooled(tmp_path):
+    """A stored run made by other code of a user method is recomputed (with one line saying so):
+    on resume, and when --runs adds runs beside it; no table pools the two codes."""
+    method = "mine.plug:run"
+    path = plugin_sweep(tmp_path, method, offset=0.0)
+    first = plugin_run(tmp_path, path)
+    assert first.returncode == 0, first.stderr
+    before = final_errors(tmp_path / "out")
+    assert max(before) < 400
+
+    plugin_sweep(tmp_path, method, offset=1000.0)  # the plug-in edited
+    again = plugin_run(tmp_path, path)
+    assert again.returncode == 0, again.stderr
+    assert "2 tasks (2 runs) run, 0 tasks (0 runs) already done" in again.stdout
+    notes = [line for line in again.stderr.splitlines() if line.startswith("note:")]
+    assert len(notes) == 1 and f"recomputing 2 stored run(s) of {method} in 1 cell(s): its code has changed" \
+        in notes[0], again.stderr
+    assert min(final_errors(tmp_path / "out")) > 400
+
+    plugin_sweep(tmp_path, method, offset=0.0)  # edited back; then two more runs
+    more = plugin_run(tmp_path, path, "--runs", 4)
+    assert more.returncode == 0, more.stderr
+    assert "4 tasks (4 runs) run" in more.stdout  # runs 0-1 recomputed, not pooled with runs 2-3
+    assert max(final_errors(tmp_path / "out")) < 400 and len(final_errors(tmp_path / "out")) == 4
+
+
+def test_a_plugin_with_a_declared_version_is_reused_until_the_version_changes(tmp_path):
+    method = "mine.plug:METHOD"
+    path = plugin_sweep(tmp_path, method, offset=0.0, version="1")
+    assert plugin_run(tmp_path, path).returncode == 0
+    before = final_errors(tmp_path / "out")
+    plugin_sweep(tmp_path, method, offset=1000.0, version="1")  # the author says: same results
+    same = plugin_run(tmp_path, path)
+    assert same.returncode == 0 and "0 tasks (0 runs) run" in same.stdout, same.stdout + same.stderr
+    assert final_errors(tmp_path / "out") == before
+    plugin_sweep(tmp_path, method, offset=1000.0, version="2")
+    bumped = plugin_run(tmp_path, path)
+    assert bumped.returncode == 0 and "2 tasks (2 runs) run" in bumped.stdout, bumped.stderr
+    assert "(now: version 2)" in bumped.stderr
+    assert min(final_errors(tmp_path / "out")) > 400

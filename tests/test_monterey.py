@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tanbench.runner.sweep import load_sweep
+from tanbench.sweep import load_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "monterey"
@@ -22,7 +22,7 @@ def at_root(monkeypatch):
 
 def test_monterey_sweep_validates_and_has_real_relief(at_root):
     """configs/monterey.yaml reads the four tiles; the track crosses the canyon."""
-    from tanbench.runner.engine import validate_worlds
+    from tanbench.runner.validate import validate_worlds
     from tanbench.simulation import motion_plan
     from tanbench.terrain import truth_map
     from tanbench.terrain.stats import track_statistics

@@ -18,7 +18,7 @@ from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.navigation import increments as incmod
 from tanbench.navigation.increments import compute_euler_inputs, compute_increments, euler_inputs_numpy
 from tanbench.profiles import PROFILES, describe_profile, profile_settings
-from tanbench.runner.sweep import parse_sweep
+from tanbench.sweep import parse_sweep
 from tanbench.terrain.layouts import layout
 from tanbench.terrain.synthetic import with_roughness
 

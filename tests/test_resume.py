@@ -1,27 +1,33 @@
-"""Killing a sweep (SIGKILL, Ctrl-C or SIGTERM) at any point and re-running the same command completes it exactly.
+"""Killing a sweep (SIGKILL, Ctrl-C, SIGTERM, SIGHUP) at any point and re-running the same command completes it exactly.
 
 The CLI runs in its own process group (``start_new_session``) so the signal reaches it
 and its worker processes together, as a terminal's Ctrl-C or an OOM/cluster kill would.
+A worker that dies alone costs only its tasks (run again, never stored as failures), and
+the workers die with the CLI however it dies.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pandas as pd
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
 from sweep_support import (
-    counted,
-    assert_same_runs, cli, finished_runs, kill_group, load_tables, start_cli, sweep_dict, wait_for_runs,
+    ROOT, counted,
+    assert_same_runs, cli, cli_env, finished_runs, kill_group, load_tables, start_cli, sweep_dict, wait_for_runs,
     write_sweep,
 )
 from tanbench import results
+from tanbench.sweep import load_sweep
 
 RUNS = 12
 N_TASKS = 2 * RUNS  # two cells (map resolution 10 and 20 m)
@@ -109,11 +115,11 @@ def test_sigkill_then_resume_matches_uninterrupted(reference, tmp_path, after):
     assert_finished_like(out, ref_out)
 
 
-@pytest.mark.parametrize("how", ["ctrl-c", "sigterm-to-the-cli"])
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm-to-the-cli", "sighup-to-the-cli"])
 def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path, how):
-    """Ctrl-C (SIGINT to the group), or SIGTERM to the CLI process alone (``kill PID``, a batch
-    scheduler's stop), stops the sweep within seconds with exit 130 and a resume hint, and takes
-    the worker processes with it."""
+    """Ctrl-C (SIGINT to the group), SIGTERM to the CLI process alone (``kill PID``, a batch
+    scheduler's stop) or SIGHUP (its terminal closed) stops the sweep within seconds with exit
+    130 and a resume hint, and takes the worker processes with it."""
     sweep, ref_out = reference
     out = tmp_path / "out"
     args = ("run", sweep, "--out", out, "--workers", 2)
@@ -122,7 +128,7 @@ def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path, how):
     if how == "ctrl-c":
         kill_group(proc, signal.SIGINT)
     else:
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(signal.SIGTERM if how == "sigterm-to-the-cli" else signal.SIGHUP)
     try:
         stdout, stderr = proc.communicate(timeout=30)
     except subprocess.TimeoutExpired:
@@ -132,7 +138,7 @@ def test_ctrl_c_stops_promptly_keeps_runs_and_resumes(reference, tmp_path, how):
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr
     hint = [line for line in stderr.splitlines() if line.startswith("interrupted:")]
-    assert len(hint) == 1 and f"resume with: tanbench run {sweep} --out {out} --workers 2" in hint[0]
+    assert len(hint) == 1 and f"tanbench run {sweep} --out {out} --workers 2" in hint[0], stderr
     assert wait_group_gone(proc.pid), "worker processes outlived the CLI"
     stored = finished_runs(out)
     assert seen <= stored < N_TASKS
@@ -180,3 +186,211 @@ def test_stop_now_with_half_a_result_in_the_pipe_exits(tmp_path):
         pytest.fail("the process did not exit after stop_now()")
     assert proc.returncode == 0, stderr
     assert "stopped" in stdout
+
+
+# ---- worker and parent deaths (issue 25) ------------------------------------------------------------
+
+
+def worker_pids(pid: int) -> list[int]:
+    """The pool's worker processes of the CLI process ``pid`` (its spawned children, Linux /proc)."""
+    try:
+        children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    except OSError:
+        return []
+    found = []
+    for child in children:
+        try:
+            if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
+                found.append(int(child))
+        except OSError:
+            pass
+    return found
+
+
+def gone(pids, timeout: float = 30) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        alive = [p for p in pids if Path(f"/proc/{p}").exists() and b"State:\tZ" not in _status(p)]
+        if not alive:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _status(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/status").read_bytes()
+    except OSError:
+        return b"State:\tZ"
+
+
+needs_proc = pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="finds worker processes in /proc")
+
+
+@needs_proc
+def test_a_killed_worker_costs_only_its_tasks(reference, tmp_path):
+    """kill -9 of one worker mid-sweep: its tasks run again in new worker processes, no run is stored as
+    failed, and the sweep ends exactly as the uninterrupted one."""
+    sweep, ref_out = reference
+    out = tmp_path / "out"
+    proc = start_cli("run", sweep, "--out", out, "--workers", 2, "-q")
+    wait_for_runs(proc, out, 2)
+    workers = worker_pids(proc.pid)
+    assert workers, "no worker processes found"
+    os.kill(workers[0], signal.SIGKILL)
+    stdout, stderr = proc.communicate(timeout=600)
+    assert proc.returncode == 0, stderr
+    notes = [line for line in stderr.splitlines() if line.startswith("note: a worker process ended abruptly")]
+    assert len(notes) == 1 and "were not stored and run again in new worker processes" in notes[0], stderr
+    assert (results.load(out)["status"] == "ok").all()
+    assert_finished_like(out, ref_out)
+
+
+@needs_proc
+def test_workers_die_with_the_cli_however_it_dies(reference, tmp_path):
+    """kill -9 of the CLI alone (not its group): its worker processes end too, at once (they used to
+    stay, blocked on a pipe); the rerun resumes to identical results."""
+    sweep, ref_out = reference
+    out = tmp_path / "out"
+    args = ("run", sweep, "--out", out, "--workers", 2, "-q")
+    proc = start_cli(*args)
+    wait_for_runs(proc, out, 2)
+    workers = worker_pids(proc.pid)
+    assert workers
+    proc.kill()
+    proc.wait(timeout=30)
+    try:
+        assert gone(workers, timeout=20), "worker processes outlived the CLI"
+    finally:
+        for pid in workers:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    again = cli(*args)
+    assert again.returncode == 0, again.stderr
+    assert_finished_like(out, ref_out)
+
+
+def test_the_resume_hint_is_a_command_that_works(reference, tmp_path):
+    """The hint quotes a path with a space and keeps the PYTHONPATH the sweep ran with; pasted
+    into a shell it resumes the sweep."""
+    sweep, ref_out = reference
+    out = tmp_path / "my results"
+    proc = start_cli("run", sweep, "--out", out, "--workers", 2)
+    wait_for_runs(proc, out, 2)
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    hint = [line for line in stderr.splitlines() if line.startswith("interrupted:")][0]
+    command = hint.split("resume with: ", 1)[1]
+    assert f"--out '{out}'" in command and command.startswith("PYTHONPATH="), command
+    env = cli_env()
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env['PATH']}"  # the tanbench script
+    resumed = subprocess.run(["bash", "-c", command + " -q"], capture_output=True, text=True, env=env, cwd=ROOT,
+                             timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    assert_finished_like(out, ref_out)
+
+
+# ---- what is stored stays consistent (issue 25) ---------------------------------------------------
+
+
+TINY_RESUME = sweep_dict(name="tiny", runs=3, tables={"particles": {"particles": [60, 80]}})
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A tiny sweep (2 cells x 3 runs) run once: (sweep file, results)."""
+    root = tmp_path_factory.mktemp("tiny")
+    path = write_sweep(root / "tiny.yaml", TINY_RESUME)
+    proc = cli("run", path, "--out", root / "out", "--workers", 2, "-q")
+    assert proc.returncode == 0, proc.stderr
+    return path, root / "out"
+
+
+def copied(tiny, tmp_path):
+    path, out = tiny
+    shutil.copytree(out, tmp_path / "out")
+    return path, tmp_path / "out"
+
+
+def test_failure_rows_of_a_crash_never_block_the_rerun(tiny, tmp_path):
+    """Rows stored as failed with seed -1 (how an older tanbench recorded a worker's death) are retried by
+    a plain rerun; they are not "runs made with other seeds" that only --force would clear."""
+    path, out = copied(tiny, tmp_path)
+    merged = sorted((out / "runs").glob("cell_id=*/runs.parquet"))[0]
+    table = pq.read_table(merged)
+    df = table.to_pandas()
+    df.loc[df["run"] == 2, ["seed", "filter_seed", "status", "error"]] = [-1, -1, "error", "worker failed"]
+    pq.write_table(pa.Table.from_pandas(df, schema=table.schema, preserve_index=False), merged)
+    again = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert again.returncode == 0, again.stderr
+    assert f"{counted(1)} run, {counted(5)} already done" in again.stdout
+    assert_same_runs(results.load(out), results.load(tiny[1]))
+
+
+def test_a_deleted_series_file_makes_its_cell_incomplete_until_recomputed(tiny, tmp_path):
+    path, out = copied(tiny, tmp_path)
+    victim = sorted((out / ".work" / "series").glob("cell_id=*/run-00001.parquet"))[0]
+    cell = victim.parent.name.split("=", 1)[1]
+    victim.unlink()
+    tables = cli("tables", out)
+    assert tables.returncode == 0, tables.stderr
+    warning = [line for line in tables.stderr.splitlines() if line.startswith("warning:")]
+    assert len(warning) == 1 and f"cell {cell} (missing run 1's series file)" in warning[0], tables.stderr
+    assert f"tanbench run {out / 'sweep.yaml'} --out {out}" in warning[0]
+    again = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert again.returncode == 0, again.stderr
+    assert "note: 1 stored run(s) have no series file" in again.stderr and f"{counted(1)} run" in again.stdout
+    assert victim.exists()
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "series" / "summary.parquet"),
+                                  pd.read_parquet(tiny[1] / "series" / "summary.parquet"))
+    assert "warning" not in cli("tables", out).stderr
+
+
+def test_a_deleted_runs_file_is_missing_everywhere_until_recomputed(tiny, tmp_path):
+    path, out = copied(tiny, tmp_path)
+    victim = sorted((out / "runs").glob("cell_id=*/runs.parquet"))[0]
+    cell = victim.parent.name.split("=", 1)[1]
+    victim.unlink()
+    tables = cli("tables", out)
+    assert f"warning: incomplete results: cell {cell} (no stored runs)" in tables.stderr, tables.stderr
+    check = cli("check", out, tiny[1])
+    assert check.returncode == 1 and f"missing: cell only in BASELINE: {cell}" in check.stdout, check.stdout
+    again = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert again.returncode == 0 and f"{counted(3)} run, {counted(3)} already done" in again.stdout, again.stderr
+    assert_same_runs(results.load(out), results.load(tiny[1]))
+
+
+def test_an_unreadable_run_file_is_one_line_then_set_aside_and_recomputed(tiny, tmp_path):
+    path, out = copied(tiny, tmp_path)
+    victim = sorted((out / "runs").glob("cell_id=*/runs.parquet"))[0]
+    victim.write_bytes(b"PAR1 not really")
+    tables = cli("tables", out)
+    lines = [line for line in tables.stderr.splitlines() if line.strip()]
+    assert tables.returncode == 2 and len(lines) == 1 and "not a readable Parquet file" in lines[0], tables.stderr
+    assert "sets a damaged run or series file aside and recomputes its runs" in lines[0]
+    again = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert again.returncode == 0, again.stderr
+    assert f"note: {victim} cannot be read" in again.stderr and victim.with_name(".runs.parquet.damaged").exists()
+    assert_same_runs(results.load(out), results.load(tiny[1]))
+
+
+def snapshot(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_another_seed_is_refused_even_with_force_and_nothing_is_deleted(tiny, tmp_path):
+    """A sweep with another root seed sharing a cell with the stored one: --add is refused without
+    advice that loses data, and --add --force is refused too (it used to delete the stored runs)."""
+    path, out = copied(tiny, tmp_path)
+    other = write_sweep(tmp_path / "b.yaml", sweep_dict(name="b", seed=7, runs=3,
+                                                        tables={"particles": {"particles": [80, 90]}}))
+    before = snapshot(out)
+    for extra in ([], ["--force"]):
+        proc = cli("run", other, "--out", out, "--workers", 1, "-q", "--add", *extra)
+        lines = [line for line in proc.stderr.splitlines() if line.strip()]
+        assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+        assert "one directory holds one root seed" in lines[0] and "--force" not in lines[0]
+    assert snapshot(out) == before

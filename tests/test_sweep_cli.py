@@ -24,7 +24,7 @@ from sweep_support import (
 )
 from tanbench import results
 from tanbench import store
-from tanbench.runner.sweep import load_sweep, parse_sweep
+from tanbench.sweep import load_sweep, parse_sweep
 
 N_CELLS = 3  # map_resolution {10, 20} x particles {60, 80}, the (10, 60) cell shared
 RUNS = 3
@@ -114,10 +114,11 @@ def test_cells_shared_by_tables_run_once(base):
     plan = cli("plan", sweep, "--out", out)
     assert f"{N_CELLS} cell(s) x 3 method(s) x {RUNS} run(s) = {N_CELLS * 3 * RUNS} runs in {N_TASKS} task(s)" \
         in plan.stdout
-    from tanbench.runner.engine import build_tasks, expected_seeds
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.runner.plan import build_tasks
+    from tanbench.runner.resume import ResumeState
 
-    assert len(store.completed_tasks(out, expected_seeds(build_tasks(load_sweep(sweep), False)))) == N_TASKS
+    swept = load_sweep(sweep)
+    assert len(ResumeState.read(swept, out).done(build_tasks(swept, False), need_series=True)) == N_TASKS
     # when the session ended, each cell's task files were merged into one file
     assert len(list((out / "runs").glob("*/runs.parquet"))) == N_CELLS
     assert not list((out / "runs").glob("*/run-*.parquet"))

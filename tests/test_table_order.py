@@ -7,7 +7,7 @@ import pandas as pd
 
 from tanbench.config import flatten
 from tanbench.results import sweep_tables
-from tanbench.runner.sweep import parse_sweep
+from tanbench.sweep import parse_sweep
 
 SWEEP = """
 name: order

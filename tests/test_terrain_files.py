@@ -92,7 +92,7 @@ def toy_sweep(path, map_path, runs=1) -> Path:
 def test_workers_run_a_sweep_on_a_format_they_never_imported(tmp_path, toy_format, grid):
     """The worker process (spawned, without the toy format) gets the map from the client: runs are ok."""
     from tanbench.runner.engine import run_sweep
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.sweep import load_sweep
 
     write_toy(tmp_path / "sea.toygrid", grid)
     toy_sweep(tmp_path / "toy.yaml", tmp_path / "sea.toygrid")

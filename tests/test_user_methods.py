@@ -117,6 +117,12 @@ WRONG_OUTPUTS = {
     "key": ("k = ctx.updates.size\n    return {'east': [0.0] * k, 'north': [0.0] * k, 'speed': [0.0] * k}",
             "unknown key(s) 'speed'"),
     "raises": ("raise RuntimeError('inside the run')", "RuntimeError: inside the run"),
+    # ways of ending the worker process: the run's failure, with what the method did and where
+    "sys_exit": ("import sys\n    sys.exit(3)", "called sys.exit(3) (at wrong_sys_exit.py:3)"),
+    "os_exit": ("import os\n    os._exit(3)", "called os._exit(3) (at wrong_os_exit.py:3)"),
+    "os_exit_imported": ("from os import _exit\n    _exit(3)", "called os._exit(3)"),
+    "keyboard_interrupt": ("raise KeyboardInterrupt", "raised KeyboardInterrupt (at wrong_keyboard_interrupt.py:2)"),
+    "writes_its_inputs": ("ctx.obs.dvl_ranges[:] += 50\n    return {}", "tried to write into its inputs"),
 }
 
 

@@ -2,8 +2,9 @@
 
 ``run_method`` is what the sweep engine calls: it builds the method's
 :class:`~tanbench.methods.api.MethodContext` from the run's observations (never the
-truth), runs the method, checks its output and scores it (:mod:`tanbench.scoring`).
-``run_estimates`` is its first half, which ``tanbench replay`` shares for recorded missions.
+truth; read-only, in the method's own copies), runs the method, checks its output and
+scores it (:mod:`tanbench.scoring`). ``run_estimates`` is its first half, which
+``tanbench replay`` shares for recorded missions.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ import time
 
 import numpy as np
 
-from tanbench.methods.api import MethodContext, MethodOutput, Updates, check_start_on_map, update_indices
+from tanbench.methods.api import (MethodContext, MethodOutput, Updates, as_output, check_start_on_map,
+                                  input_write_error, method_inputs, method_view, update_indices)
 from tanbench.methods.registry import MethodRecord, get, names, register
 
 __all__ = ["MethodContext", "MethodOutput", "MethodRecord", "Updates", "get", "names", "register",
@@ -24,28 +26,36 @@ def method_context(scenario, name: str, vehicle, seed: np.random.SeedSequence, r
     """What method ``name`` is given for one run: observations, map, updates, rng, options.
 
     ``vehicle.obs`` are the observations, simulated or read from a mission log; ``nmap`` the
-    navigation map (default: the scenario's, checked against the start of its track).
+    navigation map (default: the scenario's, checked against the start of its track). Both
+    reach the method read-only, in objects of its own.
     """
-    from tanbench.methods.api import method_view
     from tanbench.terrain import navigation_map
 
     record = record or get(name)
     if nmap is None:
         nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
         check_start_on_map(scenario, nmap)
-    return MethodContext(name=name, scenario=method_view(scenario), obs=vehicle.obs, nmap=nmap,
-                         updates=update_indices(scenario, vehicle.obs), rng=np.random.default_rng(seed),
+    obs, nmap = method_inputs(vehicle.obs, nmap)
+    return MethodContext(name=name, scenario=method_view(scenario), obs=obs, nmap=nmap,
+                         updates=update_indices(scenario, obs), rng=np.random.default_rng(seed),
                          options=record.parse_options(scenario))
 
 
 def run_estimates(scenario, name: str, vehicle, seed: np.random.SeedSequence, nmap=None):
-    """Run method ``name`` on one run's observations: (its context, its checked output, its wall time)."""
-    from tanbench.methods.api import as_output
+    """Run method ``name`` on one run's observations: (its context, its checked output, its wall time).
 
+    A method that writes into its (read-only) inputs fails with a one-line error naming it.
+    """
     record = get(name)
     ctx = method_context(scenario, name, vehicle, seed, record, nmap)
     started = time.perf_counter()
-    raw = record.run(ctx)
+    try:
+        raw = record.run(ctx)
+    except Exception as exc:  # noqa: BLE001 - re-raised, reworded when it is a write into the inputs
+        reworded = input_write_error(name, exc)
+        if reworded is None:
+            raise
+        raise reworded from None
     wall = time.perf_counter() - started
     return ctx, as_output(name, raw, ctx.updates.size), wall
 

@@ -15,17 +15,27 @@ same keys). It is given what a real vehicle would have, and nothing else:
 * ``ctx.rng``: the method's own seeded ``numpy.random.Generator``;
 * ``ctx.options``: its own validated options (the record's ``options`` model), or None.
 
+Every array it is given (observations, navigation solution, map, updates) is read-only:
+a method that writes into one gets an error naming it (copy an array to change it), and
+each method gets its own copies of the objects that hold them, so no method can change
+what another method, or a later run in the same worker, is given.
+
 It returns one estimate per update (:class:`MethodOutput`). tanbench scores it against
 the truth, stores, tabulates, plots and checks it like any built-in method.
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from tanbench.errors import TanbenchError
+from tanbench.config import Scenario
+from tanbench.errors import TanbenchError, describe_exception
+from tanbench.simulation import NavSolution, Observations, motion_plan
+from tanbench.terrain.grid import Map
 
 
 @dataclass(frozen=True)
@@ -46,15 +56,15 @@ class MethodContext:
     """Everything a method is given for one run (see the module docstring)."""
 
     name: str
-    scenario: object
-    obs: object
-    nmap: object
+    scenario: Scenario
+    obs: Observations
+    nmap: Map
     updates: Updates
     rng: np.random.Generator
-    options: object = None
+    options: object = None  # an instance of the record's own options model (any pydantic model), or None
 
     @property
-    def nav(self):
+    def nav(self) -> NavSolution:
         """The navigation system's solution at every IMU sample (``obs.nav``)."""
         return self.obs.nav
 
@@ -162,28 +172,57 @@ SCORED_SERIES = frozenset({
 })
 
 
-def update_indices(scenario, obs) -> Updates:
-    """The updates of a run for the scenario's sampling time (every ``T * sonar rate``-th ping)."""
+def update_indices(scenario: Scenario, obs: Observations) -> Updates:
+    """The updates of a run for the scenario's sampling time (every ``T * sonar rate``-th ping), read-only."""
     step = int(round(scenario.sampling_time_s * scenario.sensors.sonar_rate_hz))
     rows = np.arange(0, obs.ping_idx.size, step)
     imu = obs.ping_idx[rows]
-    return Updates(rows=rows, imu=imu, t=obs.t[imu])
+    return Updates(rows=read_only(rows), imu=read_only(imu), t=read_only(obs.t[imu]))
 
 
-def method_view(scenario):
-    """The scenario as a method sees it: the world-only sections withheld (None)."""
-    return scenario.model_copy(update={"terrain": None, "trajectory": None, "navigation": None, "faults": None})
+def method_view(scenario: Scenario) -> Scenario:
+    """The scenario as a method sees it: the world-only sections withheld (None); its own copy."""
+    return scenario.model_copy(update={"terrain": None, "trajectory": None, "navigation": None, "faults": None},
+                               deep=True)
 
 
-def check_start_on_map(scenario, nmap) -> None:
+def read_only(arr: np.ndarray) -> np.ndarray:
+    """A read-only view of ``arr``: the same memory (no copy, the same alignment), over a
+    read-only buffer, so that neither it nor a view of it can be made writeable again."""
+    return np.asarray(memoryview(arr).toreadonly())
+
+
+def _read_only_fields(obj):
+    """A shallow copy of a dataclass instance whose array fields are read-only views."""
+    values = {f.name: getattr(obj, f.name) for f in fields(obj)}
+    return dataclasses.replace(obj, **{k: read_only(v) for k, v in values.items() if isinstance(v, np.ndarray)})
+
+
+def method_inputs(obs: Observations, nmap: Map) -> tuple[Observations, Map]:
+    """What one method is given of a run's observations and of the navigation map: its own
+    copies of the objects, whose arrays are read-only views of the run's (no data is copied)."""
+    own_obs = dataclasses.replace(_read_only_fields(obs), nav=_read_only_fields(obs.nav))
+    return own_obs, dataclasses.replace(nmap, z=read_only(nmap.z), meta=copy.deepcopy(nmap.meta))
+
+
+READ_ONLY_WORDS = ("read-only", "readonly", "WRITEABLE")
+
+
+def input_write_error(name: str, exc: BaseException) -> TanbenchError | None:
+    """The one-line error of a method that wrote into its read-only inputs (None for another error)."""
+    if not any(word in str(exc) for word in READ_ONLY_WORDS):
+        return None
+    return TanbenchError(f"method {name!r} tried to write into its inputs ({describe_exception(exc)}): "
+                         f"what a method is given is read-only; copy an array (numpy.array(x)) to change it")
+
+
+def check_start_on_map(scenario: Scenario, nmap: Map) -> None:
     """Refuse a start whose initial uncertainty could leave the navigation map.
 
     The worst case: the navigation system's start is off the true start by up to half
     the initial position error on each axis, and the filter's initial square of side
     ``filter.initial_area_m`` is centred on it.
     """
-    from tanbench.simulation import motion_plan
-
     start = motion_plan(scenario).start_enu
     reach = scenario.navigation.initial_position_error_m / 2.0 + scenario.filter.initial_area_m / 2.0
     e = np.array([start[0] - reach, start[0] + reach])

@@ -12,16 +12,26 @@ Methods come from three places, looked up in this order:
    name is the method name, its value a ``MethodRecord`` or a run function;
 3. a sweep's ``methods:`` entry ``package.module:function`` (or ``:RECORD``): imported
    on first use, in the parent and in every worker.
+
+A stored run is reused only if it was made by the same code (:meth:`MethodRecord.code_id`):
+the built-ins' identity is :data:`tanbench.config.MODEL_VERSION` in every cell key; a
+user method's is the ``version`` its record declares or, without one, a hash of the
+Python sources of its package (of its module, when it is not in a package).
 """
 
 from __future__ import annotations
 
 import hashlib
 import importlib
+import inspect
 import re
+import sys
 from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
 from typing import Callable
 
+from tanbench.config import format_validation_error
 from tanbench.errors import TanbenchError
 
 # the built-in methods: adding one is one new module plus its line here
@@ -59,9 +69,22 @@ class MethodRecord:
     # its posterior Cramer-Rao bound (bounds.pcrb): (sensor "dvl" or "sbe", states "full" or "position");
     # None: no bound is computed for the method
     bound: tuple[str, str] | None = None
+    # a user method's declared code version: change it whenever the method's results would change
+    # (None: its package's source is its identity, and any edit of it recomputes its stored runs)
+    version: str | None = None
 
     def estimate_seconds(self, scenario) -> float:
         return self.cost_ns * 1e-9 * float(self.cost_units(scenario))
+
+    def code_id(self) -> str | None:
+        """What identifies the code that makes this method's results (None for a built-in, whose
+        identity is MODEL_VERSION in the cell key): ``version <v>`` or ``source <hash>``."""
+        if self.builtin:
+            return None
+        if self.version is not None:
+            return f"version {self.version}"
+        module = inspect.getmodule(self.run)
+        return f"source {source_hash(module.__name__ if module is not None else '')}"
 
     def parse_options(self, scenario):
         """The method's validated options from ``scenario.method_options[name]`` (None without a model)."""
@@ -79,8 +102,6 @@ class MethodRecord:
         try:
             return self.options(**given)
         except ValidationError as exc:
-            from tanbench.runner.sweep import format_validation_error
-
             raise TanbenchError(format_validation_error(exc, f"method_options.{self.name}.")) from None
 
 
@@ -178,6 +199,27 @@ def _as_record(name: str, obj, source: str) -> MethodRecord:
     doc = (getattr(obj, "__doc__", None) or "").strip().splitlines()
     return MethodRecord(name=name, seed_id=user_seed_id(name), summary=doc[0] if doc else f"user method {source}",
                         run=obj)
+
+
+@lru_cache(maxsize=None)
+def source_hash(module_name: str) -> str:
+    """A 16-hex-digit hash of the Python sources of a user module's top-level package (every
+    ``.py`` below it, by relative path), or of the module's own file outside a package."""
+    module = sys.modules.get(module_name)
+    path = getattr(module, "__file__", None)
+    if path is None:
+        return "unknown"
+    top = sys.modules.get(module_name.split(".", 1)[0])
+    top_file = getattr(top, "__file__", None)
+    if top is not module and top_file is not None and Path(top_file).name == "__init__.py":
+        root = Path(top_file).parent
+        files = sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts)
+    else:
+        root, files = Path(path).parent, [Path(path)]
+    digest = hashlib.sha256()
+    for file in files:
+        digest.update(file.relative_to(root).as_posix().encode() + b"\0" + file.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
 
 
 def user_seed_id(name: str) -> int:

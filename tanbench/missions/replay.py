@@ -101,7 +101,7 @@ def load_settings(path: Path | None) -> tuple[ReplaySettings, str]:
 def read_map(settings: ReplaySettings, map_path: str | None, label: str):
     """The navigation map (used as it is) and its terrain spec; ``map_path`` replaces ``map.path``."""
     from tanbench.config import TerrainSpec
-    from tanbench.runner.sweep import format_validation_error
+    from tanbench.config import format_validation_error
     from tanbench.terrain.files import load_file_terrain
 
     keys = dict(settings.map)
@@ -122,7 +122,7 @@ def replay_scenario(log: MissionLog, settings: ReplaySettings, spec, nmap, label
     settings, the map (its resolution). Its world sections only make it a valid Scenario: methods
     never see them (``method_view``) and the results leave them empty."""
     from tanbench.profiles import profile_settings
-    from tanbench.runner.sweep import _merge, _set_dotted, make_scenario
+    from tanbench.sweep import _merge, _set_dotted, make_scenario
 
     base: dict = {}
     for k, v in profile_settings(settings.profile).items():

@@ -58,15 +58,20 @@ def parse_yaml_model(text: str, label: str, model: type[BaseModel], keys: str):
     import yaml
     from pydantic import ValidationError
 
-    from tanbench.runner.sweep import UniqueKeyLoader, format_validation_error
+    from tanbench.config import format_validation_error
+    from tanbench.sweep import MAX_YAML_VALUES, UniqueKeyLoader, expanded_size
 
     try:
         data = yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         raise TanbenchError(f"{label}: malformed YAML ({str(exc).splitlines()[0]})") from None
+    except RecursionError:
+        raise TanbenchError(f"{label}: the YAML is nested too deeply") from None
     data = {} if data is None else data
     if not isinstance(data, dict):
         raise TanbenchError(f"{label}: must be a mapping of keys ({keys})")
+    if expanded_size(data) > MAX_YAML_VALUES:
+        raise TanbenchError(f"{label}: the YAML's aliases (*name) expand to more than {MAX_YAML_VALUES} values")
     try:
         return model(**data)
     except ValidationError as exc:

@@ -13,15 +13,24 @@ Workers never read the user's files: the truth maps of a sweep's file terrains, 
 once by the client, go to every worker (through the local pool's initialiser, or a Dask
 worker plugin that also reaches workers joining later) and are installed there with
 :func:`tanbench.terrain.install_truth_maps`.
+
+Local workers die with the process that started them, however it dies (``kill -9``, a
+closed terminal): on Linux the kernel kills them (``PR_SET_PDEATHSIG``), elsewhere a
+thread of theirs watches the parent. They ignore Ctrl-C and SIGHUP, which the parent
+handles (it stops them).
 """
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import multiprocessing
 import os
 import pickle
 import signal
+import sys
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
@@ -77,8 +86,35 @@ def install_worker_maps(maps: dict) -> None:
     noise_free_world.cache_clear()
 
 
-def _local_worker_init(maps_pickle: bytes, worlds_pickle: bytes = b"", scenario_json: str | None = None) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+PARENT_POLL_S = 1.0
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """End this process when ``parent_pid`` (the process that started it) dies."""
+    if sys.platform.startswith("linux"):
+        try:
+            if ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0:
+                if os.getppid() != parent_pid:  # it died before the line above
+                    os._exit(1)
+                return
+        except (OSError, AttributeError):
+            pass
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="tanbench-parent-watch", daemon=True).start()
+
+
+def _local_worker_init(parent_pid: int, maps_pickle: bytes, worlds_pickle: bytes = b"",
+                       scenario_json: str | None = None) -> None:
+    die_with_parent(parent_pid)
+    for name in ("SIGINT", "SIGHUP"):  # the parent handles Ctrl-C and a closed terminal, and stops us
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), signal.SIG_IGN)
     single_thread_environment()
     # the maps come pickled so that numpy is imported only after the line above
     install_worker_maps(pickle.loads(maps_pickle))
@@ -122,7 +158,7 @@ def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None =
         worlds_pickle = pickle.dumps(worlds, protocol=pickle.HIGHEST_PROTOCOL) if worlds else b""
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_local_worker_init,
-                                   initargs=(maps_pickle, worlds_pickle, scenario_json))
+                                   initargs=(os.getpid(), maps_pickle, worlds_pickle, scenario_json))
 
         def stop_now():
             processes = list((getattr(pool, "_processes", None) or {}).values())

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from tanbench.config import Scenario
+from tanbench.methods.registry import get
 
 VEHICLE_STREAM = 1
 FILTER_STREAM = 2
@@ -26,15 +27,22 @@ def _key_int(hex_key: str) -> int:
 
 def vehicle_seed(root: int, scenario: Scenario, run: int) -> np.random.SeedSequence:
     """The seed of run ``run``'s simulated vehicle data."""
-    return np.random.SeedSequence(root, spawn_key=(VEHICLE_STREAM, _key_int(scenario.pairing_key()), run))
+    return keyed_vehicle_seed(root, scenario.pairing_key(), run)
 
 
 def filter_seed(root: int, scenario: Scenario, method: str, run: int) -> np.random.SeedSequence:
     """The seed of ``method``'s filter noise in run ``run`` of this cell (its registry ``seed_id``)."""
-    from tanbench.methods.registry import get
+    return keyed_filter_seed(root, scenario.cell_key(), get(method).seed_id, run)
 
-    return np.random.SeedSequence(
-        root, spawn_key=(FILTER_STREAM, _key_int(scenario.cell_key()), get(method).seed_id, run))
+
+def keyed_vehicle_seed(root: int, pairing_key: str, run: int) -> np.random.SeedSequence:
+    """:func:`vehicle_seed` from the cell's pairing key (computed once per cell by a caller that needs many)."""
+    return np.random.SeedSequence(root, spawn_key=(VEHICLE_STREAM, _key_int(pairing_key), run))
+
+
+def keyed_filter_seed(root: int, cell_key: str, seed_id: int, run: int) -> np.random.SeedSequence:
+    """:func:`filter_seed` from the cell key and the method's seed id."""
+    return np.random.SeedSequence(root, spawn_key=(FILTER_STREAM, _key_int(cell_key), seed_id, run))
 
 
 def seed_number(seed: np.random.SeedSequence) -> int:

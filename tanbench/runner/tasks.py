@@ -2,19 +2,24 @@
 
 ``execute`` runs in a worker (a local process or a Dask worker). It never raises: a
 failure of the simulation or of a method becomes rows with ``status="error"`` and the
-error text, so one bad run never stops a sweep.
+error text, so one bad run never stops a sweep. A method that ends the process its own
+way (``sys.exit``, ``os._exit``, raising ``KeyboardInterrupt``) fails the same way,
+with what it did as the error: while a method runs, ``os._exit`` raises instead of
+exiting (:func:`guard_exits`).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import threading
 import time
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from tanbench.errors import TanbenchError, describe_exception
 from tanbench.schema import METRIC_COLUMNS, SERIES_COLUMNS
 
 
@@ -36,65 +41,109 @@ class Task:
 
 @dataclass
 class TaskResult:
-    """Rows (one per method) and, if asked, each method's series as float32 arrays."""
+    """Rows (one per method), if asked each method's series as float32 arrays, and the code
+    identity of each user method as the worker ran it (:meth:`MethodRecord.code_id`)."""
 
     cell_id: str
     run: int
     rows: list[dict]
     series: dict[str, dict[str, np.ndarray]]
+    code: dict[str, str] = field(default_factory=dict)
 
 
-def _describe(exc: BaseException) -> str:
-    from tanbench.errors import TanbenchError
+class MethodEndedProcess(TanbenchError):
+    """A method called ``os._exit`` or ``sys.exit``, or raised ``KeyboardInterrupt``: its run fails."""
 
-    if isinstance(exc, TanbenchError):
-        return str(exc)
-    last = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
-    where = f" (at {os.path.basename(last.filename)}:{last.lineno})" if last else ""
-    return f"{type(exc).__name__}: {exc}{where}"
+
+class _ExitCalled(BaseException):
+    """What ``os._exit`` raises while a method runs (a BaseException, like SystemExit)."""
+
+
+_real_exit = os._exit
+_running = threading.local()
+
+
+def _guarded_exit(code: int = 0):
+    if getattr(_running, "method", None):
+        raise _ExitCalled(f"os._exit({code!r})")
+    _real_exit(code)
+
+
+def guard_exits() -> None:
+    """Make ``os._exit`` raise while a method runs in this process (idempotent). Installed
+    before any user method is imported, so ``from os import _exit`` gets it too."""
+    os._exit = _guarded_exit
+
+
+def _where(exc: BaseException) -> str:
+    """' (at file.py:line)' of the last frame of ``exc``'s traceback outside this module."""
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename != __file__]
+    return f" (at {os.path.basename(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""
+
+
+def _run_guarded(method: str, call):
+    """``call()`` with a method's ways of ending the process turned into its run's failure."""
+    _running.method = method
+    try:
+        return call()
+    except (SystemExit, KeyboardInterrupt, _ExitCalled) as exc:
+        if isinstance(exc, _ExitCalled):
+            what = f"called {exc}"
+        elif isinstance(exc, SystemExit):
+            what = f"called sys.exit({exc.code!r})"
+        else:
+            what = f"raised {type(exc).__name__}"
+        raise MethodEndedProcess(f"method {method!r} {what}{_where(exc)}: a method cannot end the worker "
+                                 f"process; raise an exception to fail its run") from None
+    finally:
+        _running.method = None
 
 
 def execute(task: Task) -> TaskResult:
     """Simulate the run's vehicle data once and run every method on it."""
     from tanbench.config import Scenario
-    from tanbench.methods import run_method
+    from tanbench.methods import get, run_method
     from tanbench.runner.seeds import filter_seed, seed_number, vehicle_seed
     from tanbench.simulation import simulate_vehicle
 
+    guard_exits()
     scenario = Scenario(**json.loads(task.scenario_json))
     vseed = vehicle_seed(task.root_seed, scenario, task.run)
     base = {"cell_id": task.cell_id, "run": task.run, "seed": seed_number(vseed)}
     empty = {k: np.nan for k in METRIC_COLUMNS}
-    rows, series = [], {}
+    rows, series, code = [], {}, {}
     started = time.perf_counter()
     try:
         vehicle = simulate_vehicle(scenario, vseed)
         vehicle_error = None
     except Exception as exc:  # noqa: BLE001 - recorded, not raised
-        vehicle, vehicle_error = None, _describe(exc)
+        vehicle, vehicle_error = None, describe_exception(exc)
     sim_wall = time.perf_counter() - started
     for method in task.methods:
         row = {**base, "method": method}
         t0 = time.perf_counter()
         try:
             fseed = filter_seed(task.root_seed, scenario, method, task.run)
+            code_id = get(method).code_id()
         except Exception as exc:  # noqa: BLE001 - a user method that no longer imports here
-            rows.append({**row, "filter_seed": -1, **empty, "status": "error", "error": _describe(exc),
+            rows.append({**row, "filter_seed": -1, **empty, "status": "error", "error": describe_exception(exc),
                          "wall_s": 0.0})
             continue
+        if code_id is not None:
+            code[method] = code_id
         row["filter_seed"] = seed_number(fseed)
         if vehicle_error is not None:
             rows.append({**row, **empty, "status": "error", "error": f"simulation: {vehicle_error}",
                          "wall_s": sim_wall})
             continue
         try:
-            result = run_method(scenario, method, vehicle, fseed)
+            result = _run_guarded(method, lambda: run_method(scenario, method, vehicle, fseed))
         except Exception as exc:  # noqa: BLE001
-            rows.append({**row, **empty, "status": "error", "error": _describe(exc),
+            rows.append({**row, **empty, "status": "error", "error": describe_exception(exc),
                          "wall_s": time.perf_counter() - t0})
             continue
         rows.append({**row, **result.metrics, "status": "ok", "error": "",
                      "wall_s": time.perf_counter() - t0 + sim_wall / len(task.methods)})
         if task.keep_series:
             series[method] = {k: np.asarray(result.series[k], dtype=np.float32) for k in SERIES_COLUMNS}
-    return TaskResult(cell_id=task.cell_id, run=task.run, rows=rows, series=series)
+    return TaskResult(cell_id=task.cell_id, run=task.run, rows=rows, series=series, code=code)

@@ -296,7 +296,7 @@ def sources_from(target, altitude_m: float | None = None, noise_m: float | None 
 def _sweep_sources(path, altitude_m, noise_m) -> list[Source]:
     import json
 
-    from tanbench.runner.sweep import load_sweep
+    from tanbench.sweep import load_sweep
     from tanbench.simulation import motion_plan
     from tanbench.terrain import navigation_map, truth_map
     from tanbench.vehicle.trajectory import sample_path

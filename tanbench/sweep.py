@@ -13,6 +13,10 @@ Parameters are scenario keys, nested ones with dots (``filter.resampling``,
 ``sensors.gyro_arw_deg_sqrt_h``). A cell is a fully resolved :class:`Scenario`;
 identical cells reached from several tables run once and remember every table they
 belong to.
+
+This is the sweep's specification, beside the scenario's (:mod:`tanbench.config`); what
+needs the methods or the worlds (method names and options, maps, tracks, sensors) is
+checked by :mod:`tanbench.runner.validate`, ``run``'s first step.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 
-from tanbench.config import Scenario, plain_number_check
+from tanbench.config import Scenario, flatten, format_validation_error, plain_number_check
 from tanbench.errors import TanbenchError
 
 Value = Any
@@ -38,12 +42,19 @@ DEFAULT_METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")  # the paper's, when a
 # letters, digits, '_', '-' and '.', not starting with '.' (no '', '.', '..', hidden files or '/')
 PATH_NAME = r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$"
 PATH_NAME_RULE = "letters, digits, '_', '-' and '.', not starting with '.'"
+# file systems allow 255 bytes per name; a table's file is written as '.<name>.parquet.<pid>.tmp' first
+MAX_NAME_LENGTH = 200
+MAX_SWEEP_BYTES = 1_000_000  # a sweep file is a page of YAML; this is far above any real one
+MAX_YAML_VALUES = 100_000  # values of the YAML once its aliases are expanded (an alias bomb has billions)
 
 
 def check_path_name(name, what: str) -> str:
     """``name`` if it is safe as one file name component, else a ValueError naming the rule."""
     if not isinstance(name, str) or re.fullmatch(PATH_NAME, name) is None:
         raise ValueError(f"{what} {name!r} cannot be used as a file name (use {PATH_NAME_RULE})")
+    if len(name) > MAX_NAME_LENGTH:
+        raise ValueError(f"{what} {name[:20]!r}... is {len(name)} characters long; it becomes a file name, "
+                         f"which may have at most {MAX_NAME_LENGTH}")
     return name
 
 
@@ -94,14 +105,8 @@ class SweepSpec(BaseModel):
 
     @field_validator("methods")
     @classmethod
-    def _known_methods(cls, v):
-        from tanbench.methods.registry import get
-
-        for m in v:
-            try:
-                get(m)
-            except TanbenchError as exc:
-                raise ValueError(str(exc)) from None
+    def _methods_once(cls, v):
+        # whether each names a method is checked with the registry (tanbench.runner.validate)
         if len(set(v)) != len(v):
             raise ValueError("a method is listed twice")
         return v
@@ -143,11 +148,18 @@ def load_sweep(path) -> Sweep:
     """Read and validate a sweep file; any problem is one ``TanbenchError`` line."""
     path = Path(path)
     try:
+        if path.exists() and not path.is_dir() and not path.is_file():  # a FIFO would block the read
+            raise TanbenchError(f"{path}: not a regular file (a FIFO, device or socket); give a sweep YAML file")
+        if path.is_file() and path.stat().st_size > MAX_SWEEP_BYTES:
+            raise TanbenchError(f"{path}: {path.stat().st_size} bytes is too large for a sweep file "
+                                f"(at most {MAX_SWEEP_BYTES})")
         text = path.read_text()
     except FileNotFoundError:
         raise TanbenchError(f"{path}: no such sweep file") from None
     except (IsADirectoryError, PermissionError, UnicodeDecodeError) as exc:
         raise TanbenchError(f"{path}: cannot read the sweep file ({exc.__class__.__name__})") from None
+    except OSError as exc:
+        raise TanbenchError(f"{path}: cannot read the sweep file ({exc.strerror or exc})") from None
     return parse_sweep(text, str(path), path)
 
 
@@ -189,8 +201,14 @@ def parse_sweep(text: str, label: str = "<sweep>", path: Path | None = None) -> 
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise TanbenchError(f"{label}: malformed YAML{where}: {problem}") from None
+    except RecursionError:
+        raise TanbenchError(f"{label}: the YAML is nested too deeply to be a sweep file") from None
     if not isinstance(data, dict):
         raise TanbenchError(f"{label}: a sweep file must be a mapping of keys (name, seed, runs, ...)")
+    values = expanded_size(data)
+    if values > MAX_YAML_VALUES:
+        raise TanbenchError(f"{label}: the YAML's aliases (*name) expand to {_count(values)} values, more than "
+                            f"a sweep file can hold ({MAX_YAML_VALUES}); an alias bomb?")
     try:
         spec = SweepSpec(**data)
     except ValidationError as exc:
@@ -201,21 +219,34 @@ def parse_sweep(text: str, label: str = "<sweep>", path: Path | None = None) -> 
     return Sweep(spec=spec, text=text, path=path, cells=cells, table_designs=table_designs)
 
 
-def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
-    """The first pydantic error as 'key.path: message (got value)'."""
-    err = exc.errors()[0]
-    loc = ".".join(str(p) for p in err["loc"] if not isinstance(p, int) or True)
-    loc = f"{prefix}{loc}" if loc else prefix.rstrip(".")
-    msg = err["msg"]
-    if err["type"] == "extra_forbidden":
-        msg = "unknown key"
-    elif msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
-    got = err.get("input")
-    shown = "" if err["type"] in ("extra_forbidden", "missing") or isinstance(got, (dict, list)) else f" (got {got!r})"
-    more = len(exc.errors()) - 1
-    tail = f"; and {more} more problem{'s' if more > 1 else ''}" if more else ""
-    return f"{loc}: {msg}{shown}{tail}" if loc else f"{msg}{shown}{tail}"
+def _count(n: int) -> str:
+    return f"{n:,}" if n < 10 ** 15 else f"about 10^{len(str(n)) - 1}"
+
+
+def expanded_size(data) -> int:
+    """How many values ``data`` holds with every shared (aliased) node counted each time it is
+    reached; a node that contains itself counts as unbounded. Linear in the distinct nodes."""
+    sizes: dict[int, int] = {}
+    stack: list[tuple[object, bool]] = [(data, False)]
+    on_path: set[int] = set()
+    while stack:
+        node, children_done = stack.pop()
+        if not isinstance(node, (dict, list)):
+            continue
+        key = id(node)
+        items = list(node.keys()) + list(node.values()) if isinstance(node, dict) else node
+        if children_done:
+            on_path.discard(key)
+            sizes[key] = 1 + sum(sizes.get(id(c), 1) for c in items)
+            continue
+        if key in sizes:
+            continue
+        if key in on_path:  # a recursive alias
+            return MAX_YAML_VALUES + 1
+        on_path.add(key)
+        stack.append((node, True))
+        stack.extend((c, False) for c in items if isinstance(c, (dict, list)))
+    return sizes.get(id(data), 1)
 
 
 def _set_dotted(d: dict, key: str, value) -> None:
@@ -240,15 +271,45 @@ def _merge(base: dict, top: dict) -> dict:
     return out
 
 
-def make_scenario(base: dict, overrides: dict, label: str, where: str) -> Scenario:
-    """A validated Scenario from defaults plus dotted overrides; errors name the key."""
-    data = copy.deepcopy(base)
-    for k, v in overrides.items():
-        _set_dotted(data, k, v)
+def _get_dotted(d: dict, key: str):
+    for p in key.split("."):
+        if not isinstance(d, dict):
+            return None
+        d = d.get(p)
+    return d
+
+
+def _scenario(data: dict, label: str, where: str) -> Scenario:
     try:
         return Scenario(**data)
     except ValidationError as exc:
         raise TanbenchError(f"{label}: {where}{format_validation_error(exc)}") from None
+
+
+def make_scenario(base: dict, overrides: dict, label: str, where: str) -> Scenario:
+    """A validated Scenario from defaults plus dotted overrides; errors name the key.
+
+    An override whose value is a mapping replaces that whole section of the defaults; if
+    that drops a setting the defaults give (so that the cell differs from the section
+    merged key by key), it is refused: the sweep file says it, and it would be ignored.
+    """
+    data = copy.deepcopy(base)
+    for k, v in overrides.items():
+        _set_dotted(data, k, v)
+    scenario = _scenario(data, label, where)
+    for k, v in overrides.items():
+        given = _get_dotted(base, k)
+        if not (isinstance(v, dict) and isinstance(given, dict)):
+            continue
+        merged = copy.deepcopy(data)
+        _set_dotted(merged, k, _merge(given, v))
+        if _scenario(merged, label, where).normalized() != scenario.normalized():
+            dropped = sorted(set(flatten(given, f"{k}.")) - set(flatten(v, f"{k}.")))
+            raise TanbenchError(
+                f"{label}: {where}{k}: this mapping replaces the whole {k} section of the scenario and drops "
+                f"{', '.join(dropped)}; give the changed settings with dots ({k}.<key>: [...]) or repeat "
+                f"the dropped ones")
+    return scenario
 
 
 def expand(spec: SweepSpec, label: str) -> tuple[list[Cell], dict[str, list[str]]]:

@@ -1,0 +1,142 @@
+"""Planning a sweep: its tasks, what each costs, and how long the rest will take here.
+
+Linear in the sweep's size: a task's cost depends on its cell alone, so it is computed
+once per cell (``tanbench plan`` of a 10,000-cell grid answers in seconds).
+"""
+
+from __future__ import annotations
+
+import heapq
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tanbench import kernel_cache
+from tanbench.errors import TanbenchError
+from tanbench.methods.registry import get
+from tanbench.runner.tasks import Task
+from tanbench.sweep import Sweep
+
+SERIES_MODES = ("none", "summary", "full")
+# Time model of `tanbench plan` (calibration: docs/results.md, "How long a sweep takes").
+# Costs on one uncontended core of the 2-core development machine; the estimate divides
+# them by the share of a core each process gets at the current load average.
+# (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
+SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
+COMPILE_S = 127.0  # numba compiling every kernel (cold on-disk cache), one idle core of the 2-core dev machine (2 Dec 2026)
+WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
+FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
+LARGE_SWEEP_CELLS = 2000  # `plan`, `validate` and `run` warn past this many cells
+
+
+def build_tasks(sweep: Sweep, keep_series: bool) -> list[Task]:
+    """Every (cell, run) task of the sweep, run-major so early results cover every cell."""
+    methods = tuple(sweep.spec.methods)
+    cells = [(c.cell_id, json.dumps(c.scenario.normalized(), sort_keys=True)) for c in sweep.cells]
+    return [Task(cell_id, spec, run, methods, sweep.spec.seed, keep_series)
+            for run in range(sweep.spec.runs) for cell_id, spec in cells]
+
+
+def cell_costs(sweep: Sweep) -> dict[str, float]:
+    """Estimated single-core seconds of one task (simulation + every method) of each cell."""
+    records = [get(m) for m in sweep.spec.methods]
+    return {c.cell_id: SIMULATION_S + sum(r.estimate_seconds(c.scenario) for r in records) for c in sweep.cells}
+
+
+def size_warning(sweep: Sweep) -> str | None:
+    """A warning line for a sweep past :data:`LARGE_SWEEP_CELLS` cells (None below)."""
+    n = len(sweep.cells)
+    if n <= LARGE_SWEEP_CELLS:
+        return None
+    return (f"warning: {sweep.path or sweep.name} expands to {n} cells (x {sweep.spec.runs} runs x "
+            f"{len(sweep.spec.methods)} methods): a grid's values multiply; check that this is the design you mean")
+
+
+@dataclass
+class Plan:
+    """What a sweep will do in a results directory."""
+
+    sweep: Sweep
+    out: Path
+    tasks: list[Task]
+    done: set
+    workers: int
+    costs: dict[str, float] = field(default_factory=dict)  # cell -> one task's single-core seconds
+
+    @property
+    def todo(self) -> list[Task]:
+        return [t for t in self.tasks if t.key not in self.done]
+
+    def task_cost(self, task: Task) -> float:
+        return self.costs[task.cell_id]
+
+    def estimate_seconds(self, tasks=None) -> float:
+        """Wall seconds of running ``tasks`` (default: what is left to do), compilation included."""
+        return sum(self.estimate_parts(tasks).values())
+
+    def estimate_parts(self, tasks=None, load: float | None = None, warm: bool | None = None) -> dict[str, float]:
+        """The estimate in parts: ``compile`` (or loading the cached kernels), ``tasks`` and ``fixed``.
+
+        ``load`` is the machine's load average before the sweep starts (default: now) and
+        ``warm`` whether numba's on-disk cache holds the kernels (default: looked up).
+        """
+        tasks = self.todo if tasks is None else tasks
+        if not tasks:
+            return {"compile": 0.0, "tasks": 0.0, "fixed": 0.0}
+        load = current_load() if load is None else load
+        warm = kernel_cache.is_warm() if warm is None else warm
+        workers = max(1, min(self.workers, len(tasks)))
+        cores = default_workers()
+        share_one = min(1.0, cores / (load + 1))  # the parent alone (compiling)
+        share_all = min(1.0, cores / (load + workers))  # every worker busy
+        start = (0.0 if warm else COMPILE_S / share_one) + WARM_START_S / share_all
+        return {"compile": start,
+                "tasks": longest_first_makespan([self.task_cost(t) for t in tasks], workers) / share_all,
+                "fixed": FIXED_S / share_one}
+
+
+def check_series_mode(series: str) -> None:
+    if series not in SERIES_MODES:
+        raise TanbenchError(f"--series must be one of {', '.join(SERIES_MODES)}")
+
+
+def make_plan(sweep: Sweep, out: Path, state=None, workers: int | None = None, series: str = "summary",
+              force: bool = False) -> Plan:
+    """The tasks of ``sweep`` into ``out`` and which of them are done (none with ``force``).
+
+    ``state`` (a :class:`tanbench.runner.resume.ResumeState`, None for an empty directory)
+    says what is stored. Besides the sweep's runs 0..runs-1, stale stored runs outside that
+    range are tasks too, so that nothing stale stays beside them.
+    """
+    check_series_mode(series)
+    keep = series != "none"
+    tasks = build_tasks(sweep, keep_series=keep)
+    if state is not None:
+        specs = {t.cell_id: t.scenario_json for t in tasks[:len(sweep.cells)]}
+        tasks += [Task(cell, specs[cell], run, tuple(sweep.spec.methods), sweep.spec.seed, keep)
+                  for cell, run in sorted(state.stale_runs_outside(sweep.spec.runs, force))]
+    done = set() if force or state is None else state.done(tasks, need_series=keep)
+    return Plan(sweep=sweep, out=out, tasks=tasks, done=done, workers=workers or default_workers(),
+                costs=cell_costs(sweep))
+
+
+def longest_first_makespan(costs, workers: int) -> float:
+    """Seconds until the last of ``costs`` finishes when each goes, longest first, to the
+    worker that frees up first (how ``run`` schedules them)."""
+    loads = [0.0] * max(1, min(workers, len(costs)))
+    for cost in sorted(costs, reverse=True):
+        heapq.heappush(loads, heapq.heappop(loads) + cost)
+    return max(loads) if costs else 0.0
+
+
+def current_load() -> float:
+    """The 1-minute load average (runnable processes), 0 where the system does not report it."""
+    try:
+        return os.getloadavg()[0]
+    except (OSError, AttributeError):
+        return 0.0
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
