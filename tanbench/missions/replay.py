@@ -170,7 +170,7 @@ def replay(log_dir, map_path: str | None = None, methods=None, settings_path=Non
     """Run ``methods`` over the log in ``log_dir`` and the map; write the results to ``out``."""
     import yaml
 
-    from tanbench.runner.engine import numba_cache_is_warm
+    from tanbench.kernel_cache import is_warm as numba_cache_is_warm
 
     log = read_log(log_dir)
     label = str(settings_path or log.path)
@@ -211,7 +211,8 @@ def _run_one(scenario, name, run: LoggedRun, nmap, seed, log, bounds):
     from tanbench.config import flatten
     from tanbench.methods import run_estimates
     from tanbench.runner.seeds import seed_number
-    from tanbench.runner.tasks import _describe
+    from tanbench.errors import describe_exception
+    from tanbench.runner.tasks import guard_exits, run_guarded
     from tanbench.scoring import score
 
     fseed = method_seed(seed, name)
@@ -219,14 +220,15 @@ def _run_one(scenario, name, run: LoggedRun, nmap, seed, log, bounds):
     row = {"sweep": "replay", "tables": "", "method": name, "run": 0, "seed": seed,
            "filter_seed": seed_number(fseed), **settings, "log": str(log.path)}
     started = time.perf_counter()
+    guard_exits()
     try:
-        ctx, out, wall = run_estimates(scenario, name, run, fseed, nmap=nmap)
+        ctx, out, wall = run_guarded(name, lambda: run_estimates(scenario, name, run, fseed, nmap=nmap))
         result = None
         if run.truth is not None:
             result = score(scenario, run, ctx.updates, out, wall, nmap=nmap,
                            bound=_bound(scenario, name, run, nmap, bounds))
     except Exception as exc:  # noqa: BLE001 - a failing method is recorded, the others still run
-        return {**row, "status": "error", "error": _describe(exc), "wall_s": time.perf_counter() - started}, [], []
+        return {**row, "status": "error", "error": describe_exception(exc), "wall_s": time.perf_counter() - started}, [], []
     row.update(result.metrics if result is not None else {"filter_wall_s": wall})
     row.update(status="ok", error="", wall_s=time.perf_counter() - started)
     series = [pd.DataFrame({"method": name, **result.series})] if result is not None else []

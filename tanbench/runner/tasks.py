@@ -81,7 +81,7 @@ def _where(exc: BaseException) -> str:
     return f" (at {os.path.basename(frames[-1].filename)}:{frames[-1].lineno})" if frames else ""
 
 
-def _run_guarded(method: str, call):
+def run_guarded(method: str, call):
     """``call()`` with a method's ways of ending the process turned into its run's failure."""
     _running.method = method
     try:
@@ -137,7 +137,7 @@ def execute(task: Task) -> TaskResult:
                          "wall_s": sim_wall})
             continue
         try:
-            result = _run_guarded(method, lambda: run_method(scenario, method, vehicle, fseed))
+            result = run_guarded(method, lambda: run_method(scenario, method, vehicle, fseed))
         except Exception as exc:  # noqa: BLE001
             rows.append({**row, **empty, "status": "error", "error": describe_exception(exc),
                          "wall_s": time.perf_counter() - t0})
