@@ -95,7 +95,8 @@ SUMMARY_EXTRA_COLUMNS = ("divergence_rate", "mean_filter_wall_s")
 
 
 def summarize(df: pd.DataFrame, by=("cell_id", "method"), columns=()) -> pd.DataFrame:
-    """Per group: n_runs and the statistics of the final and time-averaged errors.
+    """Per group: n_runs and the statistics of the final and time-averaged errors, the lost-run
+    rate with its exact interval, and the declared summaries of further metrics.
 
     ``columns``: further columns of :data:`SUMMARY_EXTRA_COLUMNS` (a sweep's ``table_columns``):
     ``divergence_rate`` (n_diverged / n_runs) and ``mean_filter_wall_s`` (the filter's wall
@@ -125,6 +126,8 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method"), columns=()) -> pd.Data
             "mean_final_heading_error_deg": float(ok["final_heading_error_deg"].mean()) if f.size else np.nan,
             "n_diverged": int(ok["diverged"].astype(bool).sum()),
             "n_failed": int((g["status"] != "ok").sum()),
+            **_two_part_columns(ok),
+            **_declared_columns(ok),
             **_consistency_columns(ok),
             **_efficiency_columns(ok),
         })
@@ -133,6 +136,32 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method"), columns=()) -> pd.Data
                  if f.size and "filter_wall_s" in ok else np.nan}
         rows[-1].update({c: extra[c] for c in columns})
     return pd.DataFrame(rows)
+
+
+def _two_part_columns(ok: pd.DataFrame) -> dict:
+    """The two parts of the outcome (docs/results.md, "Verdicts"): the lost-run rate (``diverged``,
+    docs/model.md 6.5) with its exact Clopper-Pearson 95 % interval; the time-averaged error's
+    bootstrap 95 % interval; the tail (90th percentile) of the final and time-averaged errors."""
+    from tanbench.inference import clopper_pearson, p90
+
+    lost = ok["diverged"].astype(bool).to_numpy() if len(ok) else np.zeros(0, bool)
+    lo, hi = clopper_pearson(int(lost.sum()), lost.size)
+    ta = ok["mean_horizontal_error_m"].to_numpy(dtype=float) if len(ok) else np.zeros(0)
+    f = ok["final_horizontal_error_m"].to_numpy(dtype=float) if len(ok) else np.zeros(0)
+    ta_lo, ta_hi = bootstrap_ci(ta)
+    return {"lost_rate": float(lost.mean()) if lost.size else np.nan, "lost_ci95_low": lo, "lost_ci95_high": hi,
+            "time_avg_ci95_low_m": ta_lo, "time_avg_ci95_high_m": ta_hi,
+            "p90_final_error_m": float(p90(f)) if f.size else np.nan,
+            "p90_time_avg_error_m": float(p90(ta)) if ta.size else np.nan}
+
+
+def _declared_columns(ok: pd.DataFrame) -> dict:
+    """``mean_<name>`` of every metric declared with ``summary="mean"`` that the runs have."""
+    from tanbench.metrics.declarations import METRICS
+
+    return {f"mean_{m.name}": float(np.nanmean(ok[m.name].to_numpy(dtype=float)))
+            if len(ok) and np.isfinite(ok[m.name].to_numpy(dtype=float)).any() else np.nan
+            for m in METRICS if m.summary == "mean" and m.name in ok.columns}
 
 
 def _consistency_columns(ok: pd.DataFrame) -> dict:
