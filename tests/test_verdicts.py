@@ -151,7 +151,7 @@ def test_lost_runs_are_their_own_outcome(copy_of_baseline):
     t = compare(copy_of_baseline, BASELINE, CheckOptions(min_runs=5)).table
     row = t[(t["cell_id"] == victim) & (t["method"] == "tight-dvl")].set_index("metric")
     assert row.loc["lost", "verdict"] == "regressed"
-    assert row.loc["lost", "change"] == pytest.approx(12 / 30)
+    assert row.loc["lost", "change"] == pytest.approx(12 / row.loc["lost", "n_new"])
     assert (t.drop(t[(t["metric"] == "lost")].index)["verdict"] != "regressed").all()
 
 
@@ -181,7 +181,7 @@ def test_three_runs_of_a_method_made_700_times_worse_do_not_pass(copy_of_baselin
 def test_underpowered_rows_fail_unless_allowed(copy_of_baseline):
     runner = CliRunner()
     bad = runner.invoke(app, ["check", str(copy_of_baseline), str(BASELINE)])
-    assert bad.exit_code == 1 and "underpowered" in bad.output  # 30 runs cannot see 5 more lost in 100
+    assert bad.exit_code == 1 and "underpowered" in bad.output  # 80 runs cannot see 5 more lost in 100
     ok = runner.invoke(app, ["check", str(copy_of_baseline), str(BASELINE), "--allow-underpowered"])
     assert ok.exit_code == 0, ok.output
 
