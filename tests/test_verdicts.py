@@ -208,3 +208,42 @@ def test_ignore_never_averages_two_cells_into_one_row(copy_of_baseline):
     """Ignoring a column that tells two cells apart would merge them: refused with one line."""
     with pytest.raises(TanbenchError, match="one cell; check compares cell with cell"):
         compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("sampling_time_s",)))
+
+
+# ---- --until-decisive ---------------------------------------------------------------------------
+
+SMALL = """
+name: sequential
+seed: 5
+runs: 4
+methods: [tight-dvl]
+scenario: {particles: 60, duration_s: 60%s}
+"""
+
+
+def _decisive_run(tmp_path, tag):
+    from tanbench.runner.engine import run_sweep
+    from tanbench.sequential import until_decisive
+    from tanbench.sweep import parse_sweep
+
+    dirs = []
+    for name, extra in (("new", ", faults: {map_offset_east_m: 40.0}"), ("base", "")):
+        d = tmp_path / f"{tag}-{name}"
+        text = SMALL % extra
+        run_sweep(parse_sweep(text, "s.yaml"), d, workers=1, series="none", progress=False,
+                  echo=lambda *_: None, note=lambda *_: None)
+        dirs.append(d)
+    lines = []
+    result = until_decisive(dirs[0], dirs[1], CheckOptions(ignore=("faults.map_offset_east_m",), min_runs=2),
+                            batch=4, cap=12, echo=lines.append)
+    return result, lines
+
+
+def test_until_decisive_is_deterministic_and_spends_alpha_over_its_looks(tmp_path):
+    """Two fresh starts of the same comparison stop at the same look with the same table; the
+    looks are 4, 8, 12 runs, each at alpha / 3."""
+    first, lines = _decisive_run(tmp_path, "a")
+    again, lines2 = _decisive_run(tmp_path, "b")
+    assert lines == lines2 and lines[0].startswith("look 1/3: 4 runs per cell, level 0.017")
+    cols = ["metric", "n_new", "change", "p_worse", "verdict"]
+    assert first.table[cols].equals(again.table[cols])
