@@ -36,7 +36,8 @@ NOT_REPRODUCED = {
         "1b": "regularised, one beam does as well as four: tight-sbe 1.5 m against tight-dvl 2.4 m (p = 1); the "
               "anatomy's regularisation switch takes the literal tight-sbe 131.7 -> 2.9 m (-128.8 [-224.3, -33.3])",
         "1c": "the closed-loop loose TAN's median (1.6 m) beats tight-dvl's (2.0 m); its mean, 3.5 m, comes from "
-              "1 of 50 runs lost at the start (paired test p = 0.95; against tight-sbe p = 0.010)",
+              "1 of 50 runs lost at the start (paired permutation test of the mean p = 0.49; against tight-sbe "
+              "p = 0.0077)",
         "2b": "the MC mean |heading error| in area B is 1.61 deg (A: 1.56 deg, p = 0.44): the synthetic flat "
               "region still makes the heading observable",
         "4a-loose": "counted on the mean since issue 22: loose-dvl 10 -> 20 m map 3.5 -> 4.4 m, p = 0.49 (the 3.5 m "

@@ -235,15 +235,15 @@ def _decisive_run(tmp_path, tag):
         dirs.append(d)
     lines = []
     result = until_decisive(dirs[0], dirs[1], CheckOptions(ignore=("faults.map_offset_east_m",), min_runs=2),
-                            batch=4, cap=12, echo=lines.append)
+                            batch=4, cap=8, echo=lines.append)
     return result, lines
 
 
 def test_until_decisive_is_deterministic_and_spends_alpha_over_its_looks(tmp_path):
     """Two fresh starts of the same comparison stop at the same look with the same table; the
-    looks are 4, 8, 12 runs, each at alpha / 3."""
+    looks are 4 and 8 runs, each at alpha / 2."""
     first, lines = _decisive_run(tmp_path, "a")
     again, lines2 = _decisive_run(tmp_path, "b")
-    assert lines == lines2 and lines[0].startswith("look 1/3: 4 runs per cell, level 0.017")
+    assert lines == lines2 and lines[0].startswith("look 1/2: 4 runs per cell, level 0.025")
     cols = ["metric", "n_new", "change", "p_worse", "verdict"]
     assert first.table[cols].equals(again.table[cols])
