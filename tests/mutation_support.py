@@ -25,7 +25,8 @@ MUTATIONS = {
     "map offset half a cell": ("  faults: {map_offset_east_m: 5.0}", ("faults.map_offset_east_m",)),
     "sonar one ping late": ("  faults: {sonar_latency_pings: 1}", ("faults.sonar_latency_pings",)),
     "range noise x3 unmodelled": ("  faults: {range_noise_scale: 3.0}", ("faults.range_noise_scale",)),
-    "8 % of runs start 300 m off": ("  faults: {far_start_fraction: 0.08}", ("faults.far_start_fraction",)),
+    # the rare 5-10 % case needs the CI design's 240 runs per method (docs/results.md); here a quarter
+    "25 % of runs start 300 m off": ("  faults: {far_start_fraction: 0.25}", ("faults.far_start_fraction",)),
     "fewer particles (1000 -> 100)": ("  particles: 100", ("particles",)),
     "regularisation switched off": ("  filter: {regularisation: none}", ("filter.regularisation",)),
 }
@@ -36,5 +37,16 @@ NULLS = {
 
 
 def sweep_text(extra: str = "", seed: int | None = None, runs: int = RUNS) -> str:
-    text = MUTATION_SWEEP.format(runs=runs, extra=extra)
+    """The design's YAML with ``extra`` scenario lines (a line whose key the design already
+    sets replaces it) and, if given, another root seed."""
+    text = MUTATION_SWEEP.format(runs=runs, extra="")
+    lines = text.splitlines()
+    for line in extra.splitlines():
+        key = line.split(":")[0] + ":"
+        at = [i for i, old in enumerate(lines) if old.startswith(key)]
+        if at:
+            lines[at[0]] = line
+        else:
+            lines.append(line)
+    text = "\n".join(lines) + "\n"
     return text if seed is None else text.replace("seed: 2222", f"seed: {seed}")
