@@ -212,8 +212,10 @@ def _rows(scope: dict, pairs: _Pairs, labels: dict, opt: CheckOptions, pooled: b
     rate_n, rate_b = kn / max(ln.size, 1), kb / max(lb.size, 1)
     if pairs.paired:  # runs lost only in NEW / only in BASELINE: the discordant pairs
         b, c = int(np.sum(ln & ~lb)), int(np.sum(lb & ~ln))
-        # bounds of the change: at most the rate of runs lost only in NEW, at least minus the reverse
-        change_lo, change_hi = -inference.clopper_pearson(c, ln.size)[1], inference.clopper_pearson(b, ln.size)[1]
+        # the change is (b - c) / n: exact bounds of b / n and c / n combined (conservative)
+        lo_bn, hi_bn = inference.clopper_pearson(b, ln.size)
+        lo_cn, hi_cn = inference.clopper_pearson(c, ln.size)
+        change_lo, change_hi = lo_bn - hi_cn, hi_bn - lo_cn
         equivalent_lost = change_hi < opt.lost_detect
     else:
         change_lo, change_hi = lo_n - hi_b, hi_n - lo_b
