@@ -38,7 +38,8 @@ def method_styles(methods) -> dict[str, tuple[str, str]]:
     return out
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib.pyplot on the Agg backend; one clear error line when matplotlib is missing."""
     try:
         import matplotlib
 
@@ -88,7 +89,7 @@ def select_cells(sweep, stored: set, wanted: list[str] | None) -> list:
 def plot_results(directory, cells: list[str] | None = None) -> list[Path]:
     """Write the figures of ``directory`` for the cells asked for (see :func:`select_cells`);
     returns the files written."""
-    plt = _pyplot()
+    plt = pyplot()
     from tanbench.results import load_series
     from tanbench.sweep import load_results_sweep
 
@@ -265,7 +266,7 @@ def plot_frontier(directory, cells=None) -> Path:
     cell ids (default: the cells of the tables named ``budget-*``, else all)."""
     from tanbench.results import load
 
-    plt = _pyplot()
+    plt = pyplot()
     directory = Path(directory)
     runs = load(directory)
     if cells is None:

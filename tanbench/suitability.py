@@ -28,17 +28,27 @@ Windows shrink at the map edges and skip NaN nodes.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numba as nb
 import numpy as np
 from scipy import ndimage
 
 from tanbench.bounds.pcrb import ping_information, range_sensitivities
+from tanbench.config import FilterSpec, Scenario, SensorSpec, TerrainSpec
+from tanbench.errors import TanbenchError
+from tanbench.plot import pyplot
+from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
+from tanbench.simulation import motion_plan
+from tanbench.sweep import load_sweep
+from tanbench.terrain import navigation_map, truth_map
 from tanbench.terrain.grid import Map
 from tanbench.terrain.stats import gradient, slope_deg
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
+from tanbench.vehicle.trajectory import sample_path
 
 HEADINGS_DEG = (0.0, 22.5, 45.0, 67.5)
 MEASURES = ("predicted_std_m", "information_per_ping", "slope_std_deg", "roughness_m", "entropy")
@@ -245,8 +255,6 @@ def write_geotiff(values: np.ndarray, grid: Map, path) -> None:
     try:
         import tifffile
     except ImportError:
-        from tanbench.errors import TanbenchError
-
         raise TanbenchError("writing GeoTIFF needs tifffile: pip install 'tanbench[maps]'") from None
     geokeys = [1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 2, 3076, 0, 1, 9001]
     extratags = [
@@ -275,18 +283,11 @@ class Source:
 
 def sources_from(target, altitude_m: float | None = None, noise_m: float | None = None) -> list[Source]:
     """A bathymetry file (the file's grid is the map) or a sweep YAML (each terrain's map and tracks)."""
-    from pathlib import Path
-
-    from tanbench.errors import TanbenchError
-
     target = Path(target)
     if not target.exists():
         raise TanbenchError(f"{target}: no such map or sweep file")
     if target.suffix.lower() in (".yaml", ".yml"):
         return _sweep_sources(target, altitude_m, noise_m)
-    from tanbench.config import FilterSpec, Scenario, TerrainSpec
-    from tanbench.terrain import truth_map
-
     grid = truth_map(TerrainSpec(kind="file", path=str(target)))
     return [Source(label=target.stem, grid=grid, altitude_m=altitude_m or DEFAULT_ALTITUDE_M,
                    noise_m=Scenario().noise_m if noise_m is None else noise_m,
@@ -294,13 +295,6 @@ def sources_from(target, altitude_m: float | None = None, noise_m: float | None 
 
 
 def _sweep_sources(path, altitude_m, noise_m) -> list[Source]:
-    import json
-
-    from tanbench.sweep import load_sweep
-    from tanbench.simulation import motion_plan
-    from tanbench.terrain import navigation_map, truth_map
-    from tanbench.vehicle.trajectory import sample_path
-
     sweep = load_sweep(path)
     out: dict[str, Source] = {}
     seen_worlds: set[tuple[str, str]] = set()
@@ -335,9 +329,6 @@ def _terrain_label(sc) -> str:
 
 def sensor_beams(sensor: str, scenario=None) -> np.ndarray:
     """Body-frame beams of ``dvl`` (the scenario's Janus geometry) or ``sbe``."""
-    from tanbench.config import SensorSpec
-    from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
-
     s = scenario.sensors if scenario is not None else SensorSpec()
     return dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg) if sensor == "dvl" else altimeter_beam_vectors()
 
@@ -355,10 +346,7 @@ def track_summary(result: Suitability, tracks) -> list[dict]:
 def plot_suitability(result: Suitability, tracks, path) -> None:
     """A PNG of the predicted std and the classical measures, with the tracks drawn."""
     import matplotlib
-
-    from tanbench.plot import _pyplot
-
-    plt = _pyplot()
+    plt = pyplot()
     g = result.grid
     extent = (g.e0 - g.res_e / 2, g.e_max + g.res_e / 2, g.n0 - g.res_n / 2, g.n_max + g.res_n / 2)
     panels = [("predicted_std_m", f"predicted position std after {result.pings} pings (m)", "viridis_r"),
