@@ -82,7 +82,7 @@ def bench_state(particles: int) -> dict:
     from tanbench.filters.likelihood import beam_vectors
     from tanbench.filters.trig import attitude_reference
     from tanbench.methods import method_context
-    from tanbench.methods.tight import likelihood_bundle, likelihood_grid
+    from tanbench.filters.likelihood import likelihood_grid, likelihood_of
     from tanbench.navigation.increments import compute_increments
     from tanbench.simulation import simulate_vehicle
     from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -109,7 +109,7 @@ def bench_state(particles: int) -> dict:
                               np.array([nav.yaw[upd[k + 1]]]))[0]
     return dict(
         scenario=scenario, vehicle=vehicle, ctx=ctx, k=k, x0=x0, inc=inc[k], nav=nav, upd=upd, yaw_off=yaw_off,
-        yaw0=float(nav.yaw[upd[k]]), lik=likelihood_bundle(scenario.filter), grid=likelihood_grid(scenario.filter, ctx.nmap),
+        yaw0=float(nav.yaw[upd[k]]), lik=likelihood_of(scenario.filter), grid=likelihood_grid(scenario.filter, ctx.nmap),
         ranges=ranges, beams=np.ascontiguousarray(obs.dvl_beams), vec=beam_vectors(np.ascontiguousarray(obs.dvl_beams), ranges),
         att=attitude_reference(nav.pitch[upd[k + 1]], nav.roll[upd[k + 1]], nav.yaw[upd[k + 1]] + yaw_off),
         offsets=np.ascontiguousarray((obs.dvl_beams @ c.T) * ranges[:, None]), up=float(nav.pos[upd[k + 1], 2]),
@@ -286,7 +286,7 @@ def _pmf_step(s, cells: int):
     """One heading slice of the point-mass filter: its nodes, the likelihood there, the blur, the moments."""
     from tanbench.filters import likelihood as L
     from tanbench.filters import pmf
-    from tanbench.filters.params import Likelihood
+    from tanbench.filters.likelihood import Likelihood
     from tanbench.terrain.grid import node_grid
 
     nmap = s["ctx"].nmap

@@ -52,10 +52,7 @@ import numpy as np
 import pandas as pd
 
 from tanbench.config import Scenario
-from tanbench.filters.propagate import position_noise
 from tanbench.navigation.increments import D0E, D0N, JAXE, JAXN, JAZE, JAZN, SX, SZ, compute_increments
-from tanbench.options import DISTANCE_INNOVATION
-from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
 from tanbench.simulation import noise_free_world
 from tanbench.terrain import navigation_map
@@ -117,19 +114,17 @@ class BoundModel:
 def model_for(scenario, states: str) -> BoundModel:
     """The bound model for ``states`` ("full": the tight filter's, "position": the loose one's) in ``scenario``."""
     f = scenario.filter
-    T = scenario.sampling_time_s
-    q = f.process_noise_velocity_mps * T
     if states == "full":
-        sig_pos = position_noise(q, f.measurement_noise_distance_m, DISTANCE_INNOVATION[f.distance_innovation])
+        sig_pos = scenario.position_noise_m()
         cross = 0.0
     else:
-        sig_pos = q
-        cross = math.radians(f.initial_std_heading_deg) if f.loose_heading_noise else 0.0
+        sig_pos = f.process_noise_velocity_mps * scenario.sampling_time_s
+        cross = f.initial_std_heading_rad if f.loose_heading_noise else 0.0
     return BoundModel(
         states=states, initial_area_m=f.initial_area_m,
-        initial_std_heading_rad=math.radians(f.initial_std_heading_deg),
-        initial_std_bias_rad_s=f.initial_std_gyro_bias_deg_h * DEG_PER_H,
-        position_noise_m=sig_pos, heading_noise_rad=f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
+        initial_std_heading_rad=f.initial_std_heading_rad,
+        initial_std_bias_rad_s=f.initial_std_gyro_bias_rad_s,
+        position_noise_m=sig_pos, heading_noise_rad=scenario.attitude_noise_rad,
         cross_track_heading_rad=cross, range_std_m=scenario.noise_m / math.sqrt(3.0))
 
 

@@ -20,22 +20,32 @@ filter.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
 from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (BLOCK, beam_constants, loglik_loose_pass, new_likelihood_work, used_offsets,
+from tanbench.filters.likelihood import (BLOCK, Likelihood, beam_constants, loglik_loose_pass, new_likelihood_work, used_offsets,
                                         work_block)
 from tanbench.filters.propagate import DIST_NONE, propagate_loose, propagate_tight
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
-from tanbench.filters.params import Likelihood
 from tanbench.filters.tight import keep_on_map
 from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
 from tanbench.navigation.increments import JAZE, JAZN, SZ
+
+# position process noise, heading-induced cross-track noise, altitude std, off-map innovation,
+# and the horizontal std below which the filter's estimate is a position fix
+LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma converged_std")
+
+# the closed-loop loose TAN's navigation KF (navigation/eskf.py): process noise std per update
+# (position, heading, z-gyro bias), a fix every ``fix_every`` updates, chi-square gate, std added
+# to a fix, the weakest terrain-only fix used, and the gate rejections in a row after which the
+# KF is reopened
+LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses")
 
 LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states (rows) the regularisation jitters
 
@@ -70,7 +80,7 @@ def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, grid, model, rs, div,
 
     ``x`` (2, M) is the initial cloud, a column per particle; ``grid`` the navigation map's
     :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div`` and ``readings`` are the bundles of
-    :mod:`tanbench.filters.params` (LooseModel, Resampling, Divergence, Readings;
+    (LooseModel above, Resampling, Divergence, Readings of :mod:`tanbench.filters.tight`;
     of the readings the loose filter uses ``cloud_std``, ``div_reinit`` and ``collapse_spread``).
     """
     m = x.shape[1]
@@ -193,7 +203,7 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, grid, model, rs, di
 
     ``x`` (2, M) is the initial cloud; ``grid`` the navigation map's
     :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div``, ``lik``, ``guard`` and ``kf`` are the
-    bundles of :mod:`tanbench.filters.params` (LooseModel, Resampling, Divergence,
+    bundles (LooseModel, LooseKalman above; Resampling, Divergence,
     Likelihood, Guard, LooseKalman); ``model.sig_heading`` is not used (the KF's heading
     std replaces it).
     """

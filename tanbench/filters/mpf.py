@@ -186,7 +186,7 @@ def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps,
 
     ``x`` (7, M) is the initial cloud, a column per particle; ``zmap`` is the map's ``MapArgs``,
     ``rs`` a ``Resampling`` bundle (its ``cols``: E, N, psi),
-    ``div`` a ``Divergence`` bundle (``tanbench.filters.params``).
+    ``div`` a ``Divergence`` bundle (``tanbench.filters.tight``).
     """
     z, e0, n0, inv_re, inv_rn = zmap
     div_sigma, div_steps = div
@@ -240,7 +240,9 @@ def run_mpf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, inc, beams, ranges, za
     h = 0.1 on E, N, psi, 2 m minimum spread), ``divergence`` (sigma, steps).
     """
     from tanbench.filters.beams import nav_frame_offsets
-    from tanbench.filters.params import Divergence, MapArgs, Resampling
+    from tanbench.filters.resample import Resampling
+    from tanbench.filters.tight import Divergence
+    from tanbench.terrain.grid import MapArgs
     from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
 
     if resampling is None:

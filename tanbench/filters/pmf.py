@@ -41,7 +41,7 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters.likelihood import loglik_loose
-from tanbench.filters.params import Likelihood
+from tanbench.filters.likelihood import Likelihood
 
 DEAD_MASS = 1e-12
 

@@ -26,9 +26,7 @@ class EkfOptions(BaseModel):
 def run_ekf_dvl(ctx: MethodContext) -> MethodOutput:
     """The iterated EKF (SITAN) on the 4 DVL beams with slopes over the position uncertainty."""
     from tanbench.filters.ekf import run_ekf as ekf_driver
-    from tanbench.filters.propagate import position_noise
     from tanbench.navigation.increments import compute_increments
-    from tanbench.options import DISTANCE_INNOVATION
     from tanbench.sensors.imu import DEG_PER_H
 
     sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
@@ -39,8 +37,7 @@ def run_ekf_dvl(ctx: MethodContext) -> MethodOutput:
         nav.pos[upd, :2], nav.pos[upd, 2], nav.pitch[upd], nav.roll[upd], nav.yaw[upd], inc, obs.dvl_beams,
         obs.dvl_ranges[ctx.updates.rows], ctx.nmap.kernel_args(), ctx.rng, initial_area_m=f.initial_area_m,
         initial_std_heading_deg=f.initial_std_heading_deg, initial_std_gyro_bias_deg_h=f.initial_std_gyro_bias_deg_h,
-        sig_pos=position_noise(f.process_noise_velocity_mps * T, f.measurement_noise_distance_m,
-                               DISTANCE_INNOVATION[f.distance_innovation]),
+        sig_pos=sc.position_noise_m(),
         heading_drift_deg_sqrt_s=o.heading_drift_deg_sqrt_s, sampling_time_s=T, sig_u=f.measurement_noise_altitude_m,
         iterations=o.iterations, gate=o.gate)
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],
@@ -51,7 +48,7 @@ def run_ekf_dvl(ctx: MethodContext) -> MethodOutput:
 
 def ekf_steps(scenario) -> float:
     o = EkfOptions(**(scenario.method_options or {}).get("ekf-dvl", {}))
-    return o.iterations * (scenario.duration_s or 1190.0) / scenario.sampling_time_s
+    return o.iterations * scenario.planned_duration_s / scenario.sampling_time_s
 
 
 EKF_DVL = register(MethodRecord(

@@ -26,11 +26,9 @@ def run_mpf_dvl(ctx: MethodContext) -> MethodOutput:
     """The marginalized PF: particles for position and yaw, a KF per particle for depth and z-gyro biases."""
     from tanbench.filters.mpf import REG_COLS
     from tanbench.filters.mpf import run_mpf as mpf_driver
-    from tanbench.filters.propagate import position_noise
-    from tanbench.methods.tight import resampling_bundle
+    from tanbench.filters.resample import resampling_of
     from tanbench.navigation.increments import compute_increments
-    from tanbench.options import DISTANCE_INNOVATION
-    from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
+    from tanbench.sensors.imu import DEG_PER_H
 
     sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
     f, o, s = sc.filter, ctx.options, sc.sensors
@@ -42,12 +40,11 @@ def run_mpf_dvl(ctx: MethodContext) -> MethodOutput:
         initial_area_m=f.initial_area_m, initial_std_heading_deg=f.initial_std_heading_deg,
         initial_std_gyro_bias_deg_h=f.initial_std_gyro_bias_deg_h,
         initial_std_depth_bias_m=o.initial_std_depth_bias_m,
-        sig_pos=position_noise(f.process_noise_velocity_mps * T, f.measurement_noise_distance_m,
-                               DISTANCE_INNOVATION[f.distance_innovation]),
-        sig_att_step=f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T), sampling_time_s=T,
+        sig_pos=sc.position_noise_m(),
+        sig_att_step=sc.attitude_noise_rad, sampling_time_s=T,
         gyro_bias_corr_time_s=s.gyro_bias_corr_time_s, gyro_bias_instability_deg_h=s.gyro_bias_instability_deg_h,
         depth_bias_walk_m_sqrt_s=o.depth_bias_walk_m_sqrt_s, sig_u=f.measurement_noise_altitude_m,
-        outside_sigma=f.outside_map_sigma, resampling=resampling_bundle(f, REG_COLS),
+        outside_sigma=f.outside_map_sigma, resampling=resampling_of(f, REG_COLS),
         divergence=(f.divergence_sigma, f.divergence_steps))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],
                         var_n=out["var_n"], var_heading=out["var_yaw"] * (180.0 / math.pi) ** 2, ess=out["ess"],
