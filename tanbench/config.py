@@ -372,6 +372,10 @@ class FilterSpec(_Strict):
     keep_on_map: bool = new_option(True, neutral=False, description="clamp the estimate into the map, reinitialise there [false]")
     divergence_spread_m: float | None = new_option(
         100.0, neutral=None, gt=0, description="horizontal cloud std counted as divergence [None: not checked]")
+    reinit_area_m: float | None = new_option(
+        None, gt=0, description="tight filter: side of the uniform square a reinitialised cloud (divergence, collapse, "
+                                "off the map) is redrawn over [None: initial_area_m]; a Gaussian initial_cloud keeps "
+                                "its std")
 
     # ---- derived quantities -----------------------------------------------------
     @property

@@ -68,9 +68,9 @@ Divergence = namedtuple("Divergence", "sigma steps")
 # altitude std, innovation charged to a beam off the map
 TightModel = namedtuple("TightModel", "sig_pos sig_up sig_att dist_mode sig_d sig_u outside_sigma")
 
-# initial cloud (and re-initialisation): uniform square of side 2 * half_side, Gaussian up,
-# attitude, heading and gyro biases
-TightPrior = namedtuple("TightPrior", "half_side std_up std_att std_yaw std_bias")
+# initial cloud: uniform square of side 2 * half_side, Gaussian up, attitude, heading and gyro
+# biases; a re-initialisation draws the square with half side ``reinit_half_side``
+TightPrior = namedtuple("TightPrior", "half_side std_up std_att std_yaw std_bias reinit_half_side")
 
 # the paper-as-written readings (docs/model.md section 10): propagation code (options.PROPAGATION;
 # non-zero = one Euler step of Eq. 1 over ``dt`` on the Euler inputs), horizontal std of a Gaussian
@@ -124,8 +124,9 @@ def tight_model_of(scenario) -> TightModel:
 
 
 def tight_prior_of(f) -> TightPrior:
+    reinit_area_m = f.initial_area_m if f.reinit_area_m is None else f.reinit_area_m
     return TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
-                      f.initial_std_heading_rad, f.initial_std_gyro_bias_deg_h * DEG_PER_H)
+                      f.initial_std_heading_rad, f.initial_std_gyro_bias_deg_h * DEG_PER_H, reinit_area_m / 2.0)
 
 
 def tight_settings(scenario, nmap) -> TightSettings:
@@ -151,7 +152,13 @@ def _shift_scale(row, centre, std):
 def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
     """Initial cloud (``x`` (8, M)): uniform square of side 2 * prior.half_side around
     (centre_e, centre_n), Gaussians else (``prior`` is a :class:`TightPrior`)."""
-    uniform_horizontal(x, rng, centre_e, centre_n, prior.half_side)
+    draw_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior, prior.half_side)
+
+
+@nb.njit(cache=True)
+def draw_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior, half_side):
+    """:func:`init_tight` with the uniform square's half side given (a re-initialisation's)."""
+    uniform_horizontal(x, rng, centre_e, centre_n, half_side)
     fill_normals(rng, x[U:])
     _shift_scale(x[U], up, prior.std_up)
     _shift_scale(x[PITCH], pitch, prior.std_att)
@@ -246,7 +253,8 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
         diverged = readings.div_reinit and bad >= div.steps
         collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
         if diverged or collapsed or off_map:
-            init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior)
+            draw_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior,
+                       prior.reinit_half_side)
             if readings.cloud_std > 0.0:
                 gaussian_horizontal(x, rng, mean[E], mean[N], readings.cloud_std)
             logw[:] = 0.0
