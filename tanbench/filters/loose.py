@@ -47,6 +47,21 @@ LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma c
 # KF is reopened
 LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses")
 
+# the fix-only loop: the navigation at the K updates (displacements (K-1, 2), position (K, 2),
+# up (K,)), its settings (``half_side``: the initial square's) and what it fills: the
+# fix-corrected position (K, 2), the cloud's east/north variances (K, 2) and covariance,
+# ESS, reinitialisations and fixes (K,)
+FixOnlyTrack = namedtuple("FixOnlyTrack", "d0 en up")
+FixOnlySettings = namedtuple("FixOnlySettings", "model rs div half_side readings")
+FixOnlyOutputs = namedtuple("FixOnlyOutputs", "en var cov_en ess reinit fixed")
+
+# the closed loop: the navigation at the updates (increments (K-1, 12), yaw, up (K,)), its
+# settings and what it fills (position (K, 2), yaw, z-gyro bias, variances (K, 2), yaw
+# variance, ESS, reinitialisations, accepted and rejected fixes, health (K,))
+KalmanTrack = namedtuple("KalmanTrack", "inc yaw up")
+KalmanSettings = namedtuple("KalmanSettings", "model rs div half_side lik guard kf")
+KalmanOutputs = namedtuple("KalmanOutputs", "en yaw bias var var_yaw ess reinit fixed rejected healthy")
+
 LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states (rows) the regularisation jitters
 
 
@@ -72,17 +87,18 @@ def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading,
 
 
 @nb.njit(cache=True)
-def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, grid, model, rs, div, half_side, readings,
-                      out_en, var, cov_en_out, ess_out, reinit_out, fixed_out):
-    """Run the loose filter; ``out_en`` (K+1, 2) is the fix-corrected navigation position.
-
-    ``var`` (K+1, 2) and ``cov_en_out`` (K+1,) are the cloud's east/north (co)variances.
+def loose_filter_loop(x, rng, track, offsets, grid, settings, out):
+    """Run the loose filter along ``track`` (:class:`FixOnlyTrack`); fill ``out``
+    (:class:`FixOnlyOutputs`), whose ``en`` is the fix-corrected navigation position.
 
     ``x`` (2, M) is the initial cloud, a column per particle; ``grid`` the navigation map's
-    :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div`` and ``readings`` are the bundles of
+    :class:`~tanbench.terrain.grid.NodeGrid`; ``settings`` the :class:`FixOnlySettings`
     (LooseModel above, Resampling, Divergence, Readings of :mod:`tanbench.filters.tight`;
     of the readings the loose filter uses ``cloud_std``, ``div_reinit`` and ``collapse_spread``).
     """
+    d0, nav_en, nav_up = track
+    model, rs, div, half_side, readings = settings
+    out_en, var, cov_en_out, ess_out, reinit_out, fixed_out = out
     m = x.shape[1]
     steps = offsets.shape[0]
     logw = np.zeros(m)
@@ -185,9 +201,7 @@ def _open_window(m_prior, p_prior, centre_e, centre_n, half_side):
 # Closed-loop loose TAN ("kalman-feedback", the recommended architecture)
 # --------------------------------------------------------------------------------------
 @nb.njit(cache=True)
-def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, grid, model, rs, div, half_side, lik, guard,
-                      kf, p_kf, out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out,
-                      rejected_out, healthy_out):
+def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
     """Position PF -> fixes -> error-state KF of the navigation system -> corrected navigation,
     which drives the PF (docs/model.md, Section 6.2).
 
@@ -202,11 +216,14 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, grid, model, rs, di
     initial covariance, updated in place; ``out_en[0]`` holds the start position.
 
     ``x`` (2, M) is the initial cloud; ``grid`` the navigation map's
-    :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div``, ``lik``, ``guard`` and ``kf`` are the
-    bundles (LooseModel, LooseKalman above; Resampling, Divergence,
-    Likelihood, Guard, LooseKalman); ``model.sig_heading`` is not used (the KF's heading
-    std replaces it).
+    :class:`~tanbench.terrain.grid.NodeGrid`; ``track`` the :class:`KalmanTrack`; ``settings``
+    the :class:`KalmanSettings` (LooseModel, LooseKalman above; Resampling, Divergence,
+    Likelihood, Guard); ``model.sig_heading`` is not used (the KF's heading std replaces
+    it); ``out`` the :class:`KalmanOutputs` it fills.
     """
+    inc, nav_yaw, nav_up = track
+    model, rs, div, half_side, lik, guard, kf = settings
+    out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out, rejected_out, healthy_out = out
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]

@@ -19,7 +19,9 @@ from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
 from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.likelihood import likelihood_grid, likelihood_of
-from tanbench.filters.loose import LOOSE_COLS, LooseKalman, LooseModel, loose_filter_loop, loose_kalman_loop
+from tanbench.filters.loose import (LOOSE_COLS, FixOnlyOutputs, FixOnlySettings, FixOnlyTrack, KalmanOutputs,
+                                    KalmanSettings, KalmanTrack, LooseKalman, LooseModel, loose_filter_loop,
+                                    loose_kalman_loop)
 from tanbench.filters.rng import loop_rng
 from tanbench.filters.state import N_LOOSE
 from tanbench.filters.tight import collapse_resampling_of, divergence_of, guard_of, readings_of
@@ -53,11 +55,10 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     if f.loose_architecture == "kalman-feedback":
         return _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed)
     d0 = np.ascontiguousarray(np.diff(nav.pos[upd, :2], axis=0))
-    loose_filter_loop(x, rng, d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2],
-                      offsets, likelihood_grid(f, ctx.nmap), model,
-                      collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), half, readings, out_en, var, cov_en, ess,
-                      reinit,
-                      fixed)
+    loose_filter_loop(x, rng, FixOnlyTrack(d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2]),
+                      offsets, likelihood_grid(f, ctx.nmap),
+                      FixOnlySettings(model, collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), half, readings),
+                      FixOnlyOutputs(out_en, var, cov_en, ess, reinit, fixed))
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en,
                         ess=ess, reinit=reinit.astype(bool),
                         extra={"position_fix": fixed.astype(float), "healthy": fixed.astype(float)})
@@ -81,10 +82,11 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     out_en[0] = nav.pos[upd[0], :2]
     out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
-    loose_kalman_loop(x, rng, inc, nav.yaw[upd], nav.pos[upd, 2], offsets, likelihood_grid(f, ctx.nmap), model,
-                      collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), f.initial_area_m / 2.0,
-                      likelihood_of(f), guard_of(f, ctx.nmap), kf, p_kf,
-                      out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
+    settings = KalmanSettings(model, collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), f.initial_area_m / 2.0,
+                              likelihood_of(f), guard_of(f, ctx.nmap), kf)
+    loose_kalman_loop(x, rng, KalmanTrack(inc, nav.yaw[upd], nav.pos[upd, 2]), offsets, likelihood_grid(f, ctx.nmap),
+                      settings, p_kf, KalmanOutputs(out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed,
+                                                    rejected, healthy))
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], yaw=out_yaw, var_e=var[:, 0], var_n=var[:, 1],
                         var_heading=np.degrees(np.sqrt(var_yaw)) ** 2, ess=ess, reinit=reinit.astype(bool),
                         extra={"position_fix": fixed.astype(float), "fix_accepted": fixed.astype(float),

@@ -19,6 +19,7 @@ T = 10 s at 55 deg/h.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
@@ -26,6 +27,16 @@ import numpy as np
 # columns of the increments table
 D0E, D0N, JAXE, JAXN, JAZE, JAZN, SX, SZ, DYAW, DPITCH, DROLL, DUP = range(12)
 N_INCREMENTS = 12
+
+# the navigation solution at the filter updates (K,) each, ``en`` (K, 2): what the estimators'
+# drivers take instead of five arrays
+NavAtUpdates = namedtuple("NavAtUpdates", "en up pitch roll yaw")
+
+
+def nav_at_updates(nav, update_idx) -> NavAtUpdates:
+    """The navigation solution ``nav`` (pos, pitch, roll, yaw at the IMU samples) at ``update_idx``."""
+    return NavAtUpdates(nav.pos[update_idx, :2], nav.pos[update_idx, 2], nav.pitch[update_idx], nav.roll[update_idx],
+                        nav.yaw[update_idx])
 
 
 @nb.njit(cache=True)
