@@ -140,3 +140,23 @@ def test_at_most_the_dask_circle():
     circles = strongly_connected(import_graph())
     extra = [sorted(c) for c in circles if c not in ALLOWED_CIRCLES]
     assert not extra, f"import circles: {extra}"
+
+
+# where a function-local tanbench import is still allowed: the CLI (each command imports what it
+# needs), the executors (numpy only after a worker's thread limits; the Dask plug-in), and the
+# modules of the "verdicts" work on metrics (issue 26's metric declarations), to hoist there
+LOCAL_IMPORTS_ALLOWED = {"tanbench/cli.py", "tanbench/runner/executors.py", "tanbench/runner/dask_plugin.py",
+                         "tanbench/results.py", "tanbench/check.py", "tanbench/schema.py", "tanbench/scoring.py"}
+
+
+def test_function_local_imports_only_where_allowed():
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE.parent).as_posix()
+        if rel in LOCAL_IMPORTS_ALLOWED:
+            continue
+        for func in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(func, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                found += [f"{rel}:{node.lineno} {node.module}" for node in ast.walk(func)
+                          if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("tanbench")]
+    assert not found, "function-local imports (import at the top instead):\n" + "\n".join(found)

@@ -44,6 +44,7 @@ import numpy as np
 from tanbench.filters.beams import nav_frame_offsets
 from tanbench.filters.likelihood import Likelihood, loglik_loose
 from tanbench.terrain.grid import node_grid_of
+from tanbench.terrain.grid import bilinear_numpy
 
 DEAD_MASS = 1e-12
 
@@ -136,7 +137,6 @@ def resample_grid(p, ce, cn, s, ce_new, cn_new, s_new, out):
 
 
 def resample_grid_numpy(p, ce, cn, s, ce_new, cn_new, s_new):
-    from tanbench.terrain.grid import bilinear_numpy
 
     n = p.shape[0]
     c = 0.5 * (n - 1)
