@@ -121,7 +121,7 @@ def run_tight(ctx, sensor: str) -> MethodOutput:
     from tanbench.filters.estimate import weighted_estimate
     from tanbench.filters.likelihood import (beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
                                             work_block)
-    from tanbench.filters.tight import TightModel, TightPrior
+    from tanbench.filters.tight import TightModel, tight_prior_of
     from tanbench.config import position_noise
     from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight
     from tanbench.filters.resample import (add_log_weights, apply_resample, normalise_with_ess,
@@ -157,8 +157,7 @@ def run_tight(ctx, sensor: str) -> MethodOutput:
                        f.process_noise_up_m, f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
                        dist_mode, sig_d, sig_u, f.outside_map_sigma)
     readings = readings_bundle(f, T)
-    prior = TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
-                       math.radians(f.initial_std_heading_deg), f.initial_std_gyro_bias_deg_h * DEG_PER_H)
+    prior = tight_prior_of(f)
     reloc_prior = prior._replace(half_side=o.relocalise_side_m / 2.0)
     rs = resampling_of(f, REGULARISED_STATES[f.regularised_states])
     if o.floor_m is not None:
