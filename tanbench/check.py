@@ -51,7 +51,7 @@ from tanbench import inference
 from tanbench.errors import TanbenchError
 from tanbench.inference import holm  # noqa: F401 - part of this module's interface
 from tanbench.metrics.declarations import accuracy_metrics, lost_metric
-from tanbench.results import TABLE_SCENARIO_COLUMNS
+from tanbench.results import TABLE_SCENARIO_COLUMNS, load, to_markdown
 from tanbench.schema import RESULT_COLUMNS
 
 NEES_METRIC = ("nees", "nees_outside_95")
@@ -111,8 +111,6 @@ class CheckResult:
 
 
 def _load(directory, nees: bool = False) -> pd.DataFrame:
-    from tanbench.results import load
-
     runs = load(directory)
     needed = ("method", "run", "seed", "status", lost_metric().name, *(m.name for m in accuracy_metrics()))
     missing = [c for c in needed if c not in runs.columns]
@@ -403,8 +401,6 @@ def render(result: CheckResult) -> str:
 
 def write_report(result: CheckResult, path: Path) -> None:
     """Write the comparison as .parquet, .md or .json (by extension)."""
-    from tanbench.results import to_markdown
-
     path = Path(path)
     suffix = path.suffix.lower()
     try:

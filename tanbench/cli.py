@@ -605,7 +605,7 @@ def check(
                         nees_margin_abs=nees_margin, ignore=tuple(ignore or ()), pool=pool,
                         lost_detect=lost_detect, min_runs=min_runs)
     if until_decisive:
-        from tanbench.sequential import until_decisive as run_until
+        from tanbench.runner.sequential import until_decisive as run_until
 
         result = run_until(new, baseline, opts, batch, cap, echo=typer.echo)
     else:

@@ -15,6 +15,7 @@ from functools import lru_cache
 import pyarrow as pa
 from pydantic import BaseModel
 
+from tanbench.config import Scenario
 from tanbench.metrics.declarations import METRICS
 
 # per-run metric names, in the order results tables show them (declared in metrics.declarations)
@@ -68,8 +69,6 @@ def _arrow_type(annotation) -> pa.DataType:
 @lru_cache(maxsize=1)
 def scenario_column_types() -> dict[str, pa.DataType]:
     """Every flattened scenario parameter (``filter.resampling``) and its Arrow type, in model order."""
-    from tanbench.config import Scenario
-
     def walk(model, prefix):
         out = {}
         for name, info in model.model_fields.items():

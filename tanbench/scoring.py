@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tanbench.metrics.declarations import RunScore, compute_all
+from tanbench.metrics.run_metrics import score_consistency_and_bound
 from tanbench.terrain import navigation_map
 from tanbench.vehicle.attitude import wrap_pi, yaw_to_heading_deg
 
@@ -56,8 +57,6 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
     the scenario's). ``vehicle`` has the observations (``obs``) and the truth (``truth``:
     t, pos, yaw at the IMU samples), simulated or a mission log's reference.
     """
-    from tanbench.metrics.run_metrics import score_consistency_and_bound
-
     truth, nav = vehicle.truth, vehicle.obs.nav
     upd = updates.imu
     t = truth.t[upd]

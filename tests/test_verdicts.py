@@ -223,7 +223,7 @@ scenario: {particles: 60, duration_s: 60%s}
 
 def _decisive_run(tmp_path, tag):
     from tanbench.runner.engine import run_sweep
-    from tanbench.sequential import until_decisive
+    from tanbench.runner.sequential import until_decisive
     from tanbench.sweep import parse_sweep
 
     dirs = []

@@ -19,20 +19,18 @@ from pathlib import Path
 
 from tanbench.check import CheckOptions, CheckResult, compare, looks, spend
 from tanbench.errors import TanbenchError
+from tanbench.results import load
+from tanbench.runner.engine import run_sweep
+from tanbench.sweep import load_sweep
 
 
 def _stored_runs(directory: Path) -> int:
-    from tanbench.results import load
-
     runs = load(directory)
     return int(runs.groupby(["cell_id", "method"])["run"].nunique().min())
 
 
 def until_decisive(new_dir, base_dir, options: CheckOptions, batch: int, cap: int, echo=print) -> CheckResult:
     """The check at the first decisive look (or the cap); see the module docstring."""
-    from tanbench.runner.engine import run_sweep
-    from tanbench.sweep import load_sweep
-
     dirs = [Path(new_dir), Path(base_dir)]
     sweeps = []
     for d in dirs:
