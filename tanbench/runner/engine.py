@@ -83,10 +83,10 @@ def _other_code_rows(result: TaskResult, expected: dict[str, str]) -> TaskResult
 
 
 def store_result(result: TaskResult, plan: Plan, state: ResumeState, columns: dict, meta: dict,
-                 full_series: bool) -> TaskResult:
+                 full_series: bool, written: SeriesWritten | None = None) -> TaskResult:
     """Write a finished task's rows (and series) atomically, with what identifies them in the
     file's metadata: a file terrain's content hash and the user methods' code. Returns the
-    result as stored."""
+    result as stored; ``written`` keeps the series frame as written (for the summary)."""
     result = _other_code_rows(result, state.codes)
     out = plan.out
     if result.cell_id in state.terrain:
@@ -95,14 +95,38 @@ def store_result(result: TaskResult, plan: Plan, state: ResumeState, columns: di
         meta = {**meta, store.CODE_META: result.code}
     if result.series:
         frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in result.series.items()]
-        store.write_parquet(pd.concat(frames, ignore_index=True),
-                            store.series_file(out, result.cell_id, result.run, full_series), meta)
+        frame = pd.concat(frames, ignore_index=True)
+        path = store.series_file(out, result.cell_id, result.run, full_series)
+        store.write_parquet(frame, path, meta)
+        if written is not None:
+            written.keep(path, frame)
     # a recomputed run leaves no older series of itself under the other --series mode
     store.series_file(out, result.cell_id, result.run, not full_series).unlink(missing_ok=True)
     rows = [{"sweep": plan.sweep.name, **columns[result.cell_id],
              **{k: v for k, v in row.items() if k != "cell_id"}} for row in result.rows]
     store.write_table(rows_table(rows), store.run_file(out, result.cell_id, result.run), meta)
     return result
+
+
+SERIES_KEPT_MAX_BYTES = 256 * 2**20  # series frames a session keeps in memory for the summary
+
+
+class SeriesWritten:
+    """The series frames this session wrote, by file, so that the series summary is built
+    from memory instead of reading every file back (:func:`tanbench.results.build_outputs`
+    reads only the others: stored by earlier sessions, or past :data:`SERIES_KEPT_MAX_BYTES`).
+    A frame is what its file holds: Parquet brings the same columns and dtypes back."""
+
+    def __init__(self, max_bytes: int = SERIES_KEPT_MAX_BYTES):
+        self.frames: dict[Path, pd.DataFrame] = {}
+        self.room = max_bytes
+
+    def keep(self, path: Path, frame: pd.DataFrame) -> None:
+        self.frames.pop(path, None)
+        size = int(frame.memory_usage(index=False, deep=True).sum())
+        if size <= self.room:
+            self.frames[path] = frame
+            self.room -= size
 
 
 def _to_stderr(line: str) -> None:
@@ -137,14 +161,15 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     if not todo:  # with tasks to run, sweep.yaml is written once the executor is up (a scheduler that
         store.write_text(sweep.text, out / "sweep.yaml")  # does not answer changes nothing stored)
     report = RunReport(skipped=len(plan.tasks) - len(todo))
+    written = SeriesWritten()
     started = time.perf_counter()
     if todo:
-        _execute(plan, state, todo, scheduler, meta, series == "full", progress, report, note)
+        _execute(plan, state, todo, scheduler, meta, series == "full", progress, report, note, written)
     report.wall_s = time.perf_counter() - started
     log_session(out, report, plan, scheduler)
     if not report.interrupted:
         store.compact_cells(out, [c.cell_id for c in sweep.cells])
-        report.tables = build_outputs(out, sweep, series)
+        report.tables = build_outputs(out, sweep, series, written.frames)
     return report
 
 
@@ -176,23 +201,24 @@ def shared_inputs(sweep: Sweep) -> tuple[dict, dict]:
 
 
 def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note) -> None:
-    """Compile every kernel here, into numba's on-disk cache, unless it holds them
+    """Compile the kernels of the sweep's methods here, into numba's on-disk cache, unless it holds them
     (:func:`tanbench.kernel_cache.is_warm`, the rule of ``plan``'s estimate too), so that
     the workers only load them (a progress bar at 0 % for a minute would look like a hang)."""
-    if kernel_cache.is_warm():
+    methods = plan.sweep.spec.methods
+    if kernel_cache.is_warm(methods):
         return
     guess = plan.estimate_parts(todo, warm=False)["compile"]
     if progress:
         note(f"compiling the numba kernels (once per install or kernel code change; about {guess:.0f} s on this "
              f"machine now)...")
     started = time.perf_counter()
-    warm_up(todo[0].scenario_json)
+    warm_up(todo[0].scenario_json, methods)
     if progress:
         note(f"compiled in {time.perf_counter() - started:.0f} s; starting the workers")
 
 
 def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, full_series, progress,
-             report: RunReport, note) -> None:
+             report: RunReport, note, written: SeriesWritten | None = None) -> None:
     """Run ``todo`` on the executor, storing each finished task; tasks a dead worker took with it
     run again in a new pool (at most :data:`MAX_POOL_STARTS` pools), else are left to a rerun."""
     columns = cell_columns(plan.sweep)
@@ -211,7 +237,8 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
         for start in range(1, MAX_POOL_STARTS + 1):
             # the executor first: if it cannot start (a Dask address that does not answer), the
             # user sees its one error line and no half-drawn progress bar
-            with open_executor(workers, scheduler, truth_maps, worlds, remaining[0].scenario_json) as handle:
+            with open_executor(workers, scheduler, truth_maps, worlds, remaining[0].scenario_json,
+                               tuple(plan.sweep.spec.methods)) as handle:
                 store.write_text(plan.sweep.text, plan.out / "sweep.yaml")
                 if bar is None:
                     bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
@@ -228,7 +255,7 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
                                 lost.append(task)
                                 reason = reason or describe_exception(failure)
                                 continue
-                            result = store_result(fut.result(), plan, state, columns, meta, full_series)
+                            result = store_result(fut.result(), plan, state, columns, meta, full_series, written)
                             failed = [r for r in result.rows if r["status"] != "ok"]
                             report.failed_rows += len(failed)
                             report.errors += [f"{r['cell_id']} run {r['run']} {r['method']}: {r['error']}"

@@ -24,7 +24,15 @@ SERIES_MODES = ("none", "summary", "full")
 # them by the share of a core each process gets at the current load average.
 # (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
 SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
-COMPILE_S = 127.0  # numba compiling every kernel (cold on-disk cache), one idle core of the 2-core dev machine (2 Dec 2026)
+# numba compiling a sweep's kernels on a cold on-disk cache: thread CPU seconds, measured one method
+# after another in this order on the 2-core dev machine (2 Dec 2026, docs/speed.md "Compiling"):
+# the run's simulation (strapdown navigation, IMU errors), then each method family's kernels (a
+# family: the methods named FAMILY-sensor, which run the same kernels with the same types; the
+# first, tight, includes the random numbers and resampling the later ones reuse). A sweep compiles
+# only the families it names.
+COMPILE_SHARED_S = 6.3
+COMPILE_FAMILY_S = {"tight": 53.9, "loose": 32.4, "pmf": 19.8, "mpf": 11.4, "ekf": 14.0, "tercom": 8.5}
+COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
 WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
 FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
 LARGE_SWEEP_CELLS = 2000  # `plan`, `validate` and `run` warn past this many cells
@@ -42,6 +50,18 @@ def cell_costs(sweep: Sweep) -> dict[str, float]:
     """Estimated single-core seconds of one task (simulation + every method) of each cell."""
     records = [get(m) for m in sweep.spec.methods]
     return {c.cell_id: SIMULATION_S + sum(r.estimate_seconds(c.scenario) for r in records) for c in sweep.cells}
+
+
+def compile_seconds(methods, cold=None) -> float:
+    """Single-core seconds numba takes to compile the kernels of ``methods`` (the cold ones,
+    :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle."""
+    from tanbench.methods.registry import builtin_names
+
+    cold = kernel_cache.cold_methods(methods) if cold is None else [m for m in cold if m in builtin_names()]
+    if not cold:
+        return 0.0
+    families = {m.rsplit("-", 1)[0] for m in cold}
+    return COMPILE_SHARED_S + sum(COMPILE_FAMILY_S.get(f, COMPILE_OTHER_FAMILY_S) for f in families)
 
 
 def size_warning(sweep: Sweep) -> str | None:
@@ -79,18 +99,20 @@ class Plan:
         """The estimate in parts: ``compile`` (or loading the cached kernels), ``tasks`` and ``fixed``.
 
         ``load`` is the machine's load average before the sweep starts (default: now) and
-        ``warm`` whether numba's on-disk cache holds the kernels (default: looked up).
+        ``warm`` whether numba's on-disk cache holds the kernels of the sweep's methods
+        (default: looked up per method; False: none of them, True: all).
         """
         tasks = self.todo if tasks is None else tasks
         if not tasks:
             return {"compile": 0.0, "tasks": 0.0, "fixed": 0.0}
         load = current_load() if load is None else load
-        warm = kernel_cache.is_warm() if warm is None else warm
+        methods = self.sweep.spec.methods
+        compile_s = compile_seconds(methods, None if warm is None else [] if warm else methods)
         workers = max(1, min(self.workers, len(tasks)))
         cores = default_workers()
         share_one = min(1.0, cores / (load + 1))  # the parent alone (compiling)
         share_all = min(1.0, cores / (load + workers))  # every worker busy
-        start = (0.0 if warm else COMPILE_S / share_one) + WARM_START_S / share_all
+        start = compile_s / share_one + WARM_START_S / share_all
         return {"compile": start,
                 "tasks": longest_first_makespan([self.task_cost(t) for t in tasks], workers) / share_all,
                 "fixed": FIXED_S / share_one}
