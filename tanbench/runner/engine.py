@@ -23,9 +23,12 @@ import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
+import pyarrow as pa
 from tqdm import tqdm
 
 from tanbench import __version__, kernel_cache, store
@@ -82,6 +85,32 @@ def _other_code_rows(result: TaskResult, expected: dict[str, str]) -> TaskResult
                       {m: c for m, c in result.code.items() if m not in wrong})
 
 
+@lru_cache(maxsize=1)
+def _string_type() -> pa.DataType:
+    """The Arrow type pandas' conversion gives a column of Python strings (large_string in
+    newer pandas, string before)."""
+    return pa.Table.from_pandas(pd.DataFrame({"s": ["x"]}), preserve_index=False).schema.field("s").type
+
+
+def series_table(result: TaskResult) -> pa.Table:
+    """A task's series as one Arrow table: columns run, method, then the series, the methods'
+    rows one after the other. The table ``pa.Table.from_pandas`` makes of the frames
+    ``{"run", "method", **series}`` concatenated (NaN stored as null as pandas' conversion
+    does, the same types), without building them: the file written is the same."""
+    items = list(result.series.items())
+    keys = list(items[0][1])
+    if any(list(s) != keys for _, s in items[1:]):  # methods with other series: pandas aligns them
+        frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in items]
+        return pa.Table.from_pandas(pd.concat(frames, ignore_index=True), preserve_index=False)
+    lengths = [len(next(iter(s.values()))) if s else 0 for _, s in items]
+    columns = {"run": pa.array(np.full(sum(lengths), result.run, dtype=np.int64)),
+               "method": pa.array(np.repeat(np.array([m for m, _ in items], dtype=object), lengths),
+                                 _string_type())}
+    for key in keys:
+        columns[key] = pa.array(np.concatenate([np.asarray(s[key]) for _, s in items]), from_pandas=True)
+    return pa.table(columns)
+
+
 def store_result(result: TaskResult, plan: Plan, state: ResumeState, columns: dict, meta: dict,
                  full_series: bool, written: SeriesWritten | None = None) -> TaskResult:
     """Write a finished task's rows (and series) atomically, with what identifies them in the
@@ -94,12 +123,11 @@ def store_result(result: TaskResult, plan: Plan, state: ResumeState, columns: di
     if result.code:
         meta = {**meta, store.CODE_META: result.code}
     if result.series:
-        frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in result.series.items()]
-        frame = pd.concat(frames, ignore_index=True)
+        table = series_table(result)
         path = store.series_file(out, result.cell_id, result.run, full_series)
-        store.write_parquet(frame, path, meta)
+        store.write_table(table, path, meta)
         if written is not None:
-            written.keep(path, frame)
+            written.keep(path, table)
     # a recomputed run leaves no older series of itself under the other --series mode
     store.series_file(out, result.cell_id, result.run, not full_series).unlink(missing_ok=True)
     rows = [{"sweep": plan.sweep.name, **columns[result.cell_id],
@@ -112,21 +140,20 @@ SERIES_KEPT_MAX_BYTES = 256 * 2**20  # series frames a session keeps in memory f
 
 
 class SeriesWritten:
-    """The series frames this session wrote, by file, so that the series summary is built
+    """The series tables this session wrote, by file, so that the series summary is built
     from memory instead of reading every file back (:func:`tanbench.results.build_outputs`
     reads only the others: stored by earlier sessions, or past :data:`SERIES_KEPT_MAX_BYTES`).
-    A frame is what its file holds: Parquet brings the same columns and dtypes back."""
+    A table is what its file holds: it converts to pandas as the file read back does."""
 
     def __init__(self, max_bytes: int = SERIES_KEPT_MAX_BYTES):
-        self.frames: dict[Path, pd.DataFrame] = {}
+        self.tables: dict[Path, pa.Table] = {}
         self.room = max_bytes
 
-    def keep(self, path: Path, frame: pd.DataFrame) -> None:
-        self.frames.pop(path, None)
-        size = int(frame.memory_usage(index=False, deep=True).sum())
-        if size <= self.room:
-            self.frames[path] = frame
-            self.room -= size
+    def keep(self, path: Path, table: pa.Table) -> None:
+        self.tables.pop(path, None)
+        if table.nbytes <= self.room:
+            self.tables[path] = table
+            self.room -= table.nbytes
 
 
 def _to_stderr(line: str) -> None:
@@ -169,7 +196,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     log_session(out, report, plan, scheduler)
     if not report.interrupted:
         store.compact_cells(out, [c.cell_id for c in sweep.cells])
-        report.tables = build_outputs(out, sweep, series, written.frames)
+        report.tables = build_outputs(out, sweep, series, written.tables)
     return report
 
 
