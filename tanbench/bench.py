@@ -25,6 +25,7 @@ import math
 import time
 
 import numpy as np
+from tanbench import store
 from tanbench.config import Scenario
 from tanbench.filters import ekf, likelihood as L, mpf, pmf, tercom
 from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
@@ -35,8 +36,13 @@ from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals
 from tanbench.filters.trig import attitude_reference
 from tanbench.methods import get, method_context, run_method
 from tanbench.methods.registry import builtin_names, names
+from tanbench.runner.engine import cell_columns, store_result
+from tanbench.runner.plan import make_plan
+from tanbench.runner.resume import ResumeState
+from tanbench.runner.tasks import execute
 from tanbench.navigation.increments import compute_increments
-from tanbench.simulation import simulate_vehicle
+from tanbench.simulation import noise_free_world, simulate_vehicle
+from tanbench.sweep import parse_sweep
 from tanbench.terrain.grid import gather_cells, node_grid
 from tanbench.terrain.representation import map_variance_grid
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -380,9 +386,6 @@ def fixed_costs(runs: int = 5) -> dict:
     """
     import json
 
-    from tanbench.config import Scenario
-    from tanbench.methods import run_method
-    from tanbench.simulation import noise_free_world, simulate_vehicle
 
     out = {"parent_start_s": _child_cpu_s("import tanbench.cli, tanbench.runner.engine, tanbench.results"),
            "worker_start_s": _child_cpu_s(
@@ -416,12 +419,6 @@ def _store_cost(runs: int) -> float:
     import tempfile
     from pathlib import Path
 
-    from tanbench import store
-    from tanbench.runner.engine import cell_columns, store_result
-    from tanbench.runner.plan import make_plan
-    from tanbench.runner.resume import ResumeState
-    from tanbench.runner.tasks import execute
-    from tanbench.sweep import parse_sweep
 
     sweep = parse_sweep(f"name: bench\nseed: {BENCH_SEED}\nruns: 1\nmethods: {list(FIXED_COST_METHODS)}\n"
                         "scenario: {particles: 16}\n")

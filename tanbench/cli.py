@@ -196,7 +196,7 @@ def plan(
     from collections import Counter
 
     from tanbench import kernel_cache
-    from tanbench.runner.plan import current_load, default_workers, make_plan
+    from tanbench.runner.plan import builtin_methods, current_load, default_workers, make_plan
     from tanbench.runner.resume import ResumeState
     from tanbench.runner.validate import check_methods
 
@@ -217,7 +217,7 @@ def plan(
     if not todo:
         typer.echo(f"to do: nothing, every task is stored in {out} ({_count(0, n_m)} left)")
         return
-    warm = kernel_cache.is_warm(sweep.spec.methods)
+    warm = kernel_cache.is_warm(builtin_methods(sweep.spec.methods))
     parts = p.estimate_parts(warm=warm)
     start = (f"{parts['compile']:.0f} s compiling the numba kernels (cold cache) and starting workers"
              if not warm else f"{parts['compile']:.0f} s starting workers (kernels cached)")

@@ -116,8 +116,8 @@ def is_warm(methods=None) -> bool:
     """Whether the cache holds the kernels of the main filter module (a sweep then loads them
     instead of compiling; the rule of ``plan``'s estimate and of ``run``'s compile message).
 
-    With ``methods`` (a sweep's method names): whether it holds the kernels of each built-in
-    one among them, as marked by :func:`mark_warm` once a warm-up compiled them here.
+    With ``methods`` (built-in method names): whether it holds the kernels of each, as marked
+    by :func:`mark_warm` once a warm-up compiled them here.
     """
     if methods is None:
         path = cache_dir()
@@ -126,15 +126,9 @@ def is_warm(methods=None) -> bool:
 
 
 def cold_methods(methods) -> list[str]:
-    """The built-in methods among ``methods`` whose kernels this cache does not hold yet."""
+    """The built-in ``methods`` whose kernels this cache does not hold yet."""
     path = cache_dir()
-    return [name for name in methods if _is_builtin(name) and not (path / f"{WARM_MARK}{name}").is_file()]
-
-
-def _is_builtin(name: str) -> bool:
-    from tanbench.methods.registry import builtin_names
-
-    return name in builtin_names()
+    return [name for name in methods if not (path / f"{WARM_MARK}{name}").is_file()]
 
 
 def mark_warm(methods) -> None:

@@ -49,10 +49,11 @@ def test_warm_up_compiles_and_marks_only_the_sweeps_methods(tmp_path, monkeypatc
     monkeypatch.setattr("tanbench.methods.run_method", lambda scenario, method, vehicle, seed: ran.append(method))
     monkeypatch.setattr("tanbench.simulation.simulate_vehicle", lambda scenario, seed: None)
     sweep_methods = ("tight-dvl", "loose-dvl", "my.module:run")
-    assert kernel_cache.cold_methods(sweep_methods) == ["tight-dvl", "loose-dvl"]
+    assert planning.builtin_methods(sweep_methods) == ["tight-dvl", "loose-dvl"]
+    assert kernel_cache.cold_methods(planning.builtin_methods(sweep_methods)) == ["tight-dvl", "loose-dvl"]
     executors.warm_up(None, sweep_methods)
     assert ran == ["tight-dvl", "loose-dvl"]
-    assert kernel_cache.is_warm(sweep_methods) and not kernel_cache.is_warm(("tight-dvl", "pmf-dvl"))
+    assert kernel_cache.is_warm(["tight-dvl", "loose-dvl"]) and not kernel_cache.is_warm(["tight-dvl", "pmf-dvl"])
     assert planning.compile_seconds(sweep_methods) == 0.0
     assert planning.compile_seconds(("tight-dvl", "pmf-dvl")) == pytest.approx(
         planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["pmf"])

@@ -35,7 +35,7 @@ from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
 from tanbench.errors import describe_exception
 from tanbench.runner.executors import open_executor, warm_up
-from tanbench.runner.plan import Plan, check_series_mode, make_plan
+from tanbench.runner.plan import Plan, builtin_methods, check_series_mode, make_plan
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.runner.validate import check_output, validate_sweep
@@ -231,7 +231,7 @@ def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note) -> None:
     (:func:`tanbench.kernel_cache.is_warm`, the rule of ``plan``'s estimate too), so that
     the workers only load them (a progress bar at 0 % for a minute would look like a hang)."""
     methods = plan.sweep.spec.methods
-    if kernel_cache.is_warm(methods):
+    if kernel_cache.is_warm(builtin_methods(methods)):
         return
     guess = plan.estimate_parts(todo, warm=False)["compile"]
     if progress:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from tanbench import kernel_cache
 from tanbench.errors import TanbenchError
-from tanbench.methods.registry import get
+from tanbench.methods.registry import builtin_names, get
 from tanbench.runner.tasks import Task
 from tanbench.sweep import Sweep
 
@@ -52,12 +52,16 @@ def cell_costs(sweep: Sweep) -> dict[str, float]:
     return {c.cell_id: SIMULATION_S + sum(r.estimate_seconds(c.scenario) for r in records) for c in sweep.cells}
 
 
-def compile_seconds(methods, cold=None) -> float:
-    """Single-core seconds numba takes to compile the kernels of ``methods`` (the cold ones,
-    :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle."""
-    from tanbench.methods.registry import builtin_names
+def builtin_methods(methods) -> list[str]:
+    """The built-in methods among ``methods`` (the ones with kernels to compile and warm up)."""
+    builtin = builtin_names()
+    return [m for m in methods if m in builtin]
 
-    cold = kernel_cache.cold_methods(methods) if cold is None else [m for m in cold if m in builtin_names()]
+
+def compile_seconds(methods, cold=None) -> float:
+    """Single-core seconds numba takes to compile the kernels of ``methods`` (the cold built-in
+    ones, :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle."""
+    cold = kernel_cache.cold_methods(builtin_methods(methods)) if cold is None else builtin_methods(cold)
     if not cold:
         return 0.0
     families = {m.rsplit("-", 1)[0] for m in cold}
