@@ -35,7 +35,7 @@ from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
 from tanbench.errors import describe_exception
 from tanbench.runner.executors import open_executor, warm_up
-from tanbench.runner.plan import Plan, builtin_methods, check_series_mode, make_plan
+from tanbench.runner.plan import Plan, builtin_methods, check_series_mode, compile_seconds, cpu_share_now, make_plan
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.runner.validate import check_output, validate_sweep
@@ -233,7 +233,8 @@ def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note) -> None:
     methods = plan.sweep.spec.methods
     if kernel_cache.is_warm(builtin_methods(methods)):
         return
-    guess = plan.estimate_parts(todo, warm=False)["compile"]
+    # the cold methods' measured compile time over the share of a core this process gets now
+    guess = compile_seconds(methods) / cpu_share_now()
     if progress:
         note(f"compiling the numba kernels (once per install or kernel code change; about {guess:.0f} s on this "
              f"machine now)...")

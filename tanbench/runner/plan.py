@@ -9,6 +9,7 @@ from __future__ import annotations
 import heapq
 import json
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,13 +26,14 @@ SERIES_MODES = ("none", "summary", "full")
 # (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
 SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
 # numba compiling a sweep's kernels on a cold on-disk cache: thread CPU seconds, measured one method
-# after another in this order on the 2-core dev machine (2 Dec 2026, docs/speed.md "Compiling"):
+# after another in this order on the 2-core dev machine (2 Dec 2026, the kernels after issue 26's
+# wiring; docs/speed.md "Compiling"):
 # the run's simulation (strapdown navigation, IMU errors), then each method family's kernels (a
 # family: the methods named FAMILY-sensor, which run the same kernels with the same types; the
 # first, tight, includes the random numbers and resampling the later ones reuse). A sweep compiles
 # only the families it names.
-COMPILE_SHARED_S = 6.3
-COMPILE_FAMILY_S = {"tight": 53.9, "loose": 32.4, "pmf": 19.8, "mpf": 11.4, "ekf": 14.0, "tercom": 8.5}
+COMPILE_SHARED_S = 4.9
+COMPILE_FAMILY_S = {"tight": 36.0, "loose": 19.9, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
 COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
 WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
 FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
@@ -154,6 +156,16 @@ def longest_first_makespan(costs, workers: int) -> float:
     for cost in sorted(costs, reverse=True):
         heapq.heappush(loads, heapq.heappop(loads) + cost)
     return max(loads) if costs else 0.0
+
+
+def cpu_share_now(probe_s: float = 0.25) -> float:
+    """The share of a core this process gets now, measured: thread CPU over wall time of a short
+    busy loop. Unlike the load average, it sees that niced jobs yield (on 2 December 2026 at a
+    load average of 19.5, mostly niced jobs, the compile step got far more than 2 / 20.5 of a core)."""
+    c0, w0 = time.thread_time(), time.perf_counter()
+    while time.perf_counter() - w0 < probe_s:
+        pass
+    return max(0.02, min(1.0, (time.thread_time() - c0) / (time.perf_counter() - w0)))
 
 
 def current_load() -> float:
