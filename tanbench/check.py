@@ -1,32 +1,41 @@
-"""Regression check of error statistics: is NEW worse than BASELINE, cell by cell?
+"""Regression check: is NEW worse than BASELINE, cell by cell and method by method?
 
 Cells are matched by their scenario (every scenario column the two results share, so
 results from another tanbench version match as long as the schema does; ``ignore`` names
 scenario columns left out of the match, to compare cells that differ only there, e.g. the
-two random streams of ``filter.random_numbers``); cells found in only one directory are
-reported. For each matched (cell, method) and metric (final and
-time-averaged horizontal error):
+two random streams of ``filter.random_numbers``: two cells that then fall on one key are
+refused, never averaged into one row). Cells found in only one directory are reported.
 
-* the change in the mean with a bootstrap 95 % confidence interval (runs resampled
-  jointly when paired);
-* one-sided tests against a margin delta = max(rel * baseline mean, abs): "worse" tests
-  NEW - BASELINE > delta, "better" tests BASELINE - NEW > delta. Where the runs share
-  seeds (the same vehicle data) the test is paired (Wilcoxon signed-rank on the
-  per-run differences), otherwise unpaired (Mann-Whitney U);
-* Holm's correction over all comparisons, separately for "worse" and "better".
+Every (cell, method) has a **two-part outcome** (docs/results.md, "Verdicts"), from the
+metrics declared for the check (:mod:`tanbench.metrics.declarations`):
 
-A row is "regressed" if its corrected worse-p is below alpha, "improved" if its
-corrected better-p is, "unchanged" otherwise.
+* **lost runs**: the lost-run rate (``diverged``, docs/model.md 6.5) with its exact
+  interval; tested by McNemar's exact test where the runs share seeds, Fisher's exact test
+  otherwise (:func:`tanbench.inference.lost_tests`);
+* **accuracy** of the runs not lost (paired: pairs lost in neither directory): the mean and
+  the 90th percentile of each accuracy metric (final and time-averaged horizontal error),
+  each change with its bootstrap 95 % interval and a one-sided permutation test against a
+  margin delta = max(rel * baseline statistic, abs) (:func:`tanbench.inference.permutation_p`).
+
+Each row (one outcome of one cell and method, or of a method pooled over its cells with
+``pool="method"``) tests "worse" and "better"; Holm's correction runs over the decisive
+rows (the pooled rows when pooling is declared, else the cell rows), separately for worse
+and better; the cell rows under pooling form their own family and are shown for
+information. A row is **regressed** if its corrected worse-p is below alpha *and* its
+printed change exceeds its margin (so a verdict never disagrees in sign with its effect),
+**improved** in the mirror case; otherwise **unchanged** if it could have detected a
+change (its minimal detectable effect, MDE, at 80 % power is at most twice its margin; for
+lost runs at most ``lost_detect``), **underpowered** if not, and **too few runs** below
+``min_runs``. Underpowered and too-few-runs decisive rows make ``tanbench check`` fail
+unless ``--allow-underpowered``.
 
 Missing data is a failure too: a cell, a method of a matched cell, or a (successful) run
 of a matched cell and method found in only one of the directories is listed in
 ``missing`` and makes ``tanbench check`` exit 1 (``--allow-missing`` compares what the
 two share and only reports the rest).
-With ``nees`` (``tanbench check --nees``) a third metric joins: the per-run fraction of
-updates whose NEES lies outside its one-run 95 % chi-square bounds
-(``nees_above_95 + nees_below_95``, nominally 0.05; docs/model.md, section 9.2), with its
-own absolute margin ``nees_margin_abs`` (a fraction, default 0.05): a filter whose
-reported covariance stops describing its errors regresses even if its errors do not.
+With ``nees`` a further accuracy row compares the per-run fraction of updates whose NEES
+lies outside its one-run 95 % chi-square bounds (``nees_above_95 + nees_below_95``), mean
+only, with its own absolute margin ``nees_margin_abs`` (a fraction, default 0.05).
 """
 
 from __future__ import annotations
@@ -37,14 +46,17 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
+from tanbench import inference
 from tanbench.errors import TanbenchError
-from tanbench.results import TABLE_SCENARIO_COLUMNS
+from tanbench.inference import holm  # noqa: F401 - part of this module's interface
+from tanbench.metrics.declarations import accuracy_metrics, lost_metric
+from tanbench.results import TABLE_SCENARIO_COLUMNS, load, to_markdown
 from tanbench.schema import RESULT_COLUMNS
 
-METRICS = {"final": "final_horizontal_error_m", "time-avg": "mean_horizontal_error_m"}
 NEES_METRIC = ("nees", "nees_outside_95")
+TAIL = "p90"
+VERDICT_FAILS = ("regressed", "underpowered", "too few runs")
 
 
 @dataclass
@@ -53,23 +65,42 @@ class CheckOptions:
     margin_abs: float = 1.0
     alpha: float = 0.05
     bootstrap: int = 2000
+    permutations: int = inference.PERMUTATIONS
     seed: int = 0
     nees: bool = False
     nees_margin_abs: float = 0.05
     ignore: tuple[str, ...] = ()  # scenario columns left out of the cell match
+    pool: str = "none"  # "method": decisive rows pool each method over the matched cells
+    lost_detect: float = 0.05  # a lost-run row must detect this increase of the rate (5 runs in 100)
+    min_runs: int = 10  # fewer runs in a row: "too few runs"
+    tail: bool = True  # also test the 90th percentile of each accuracy metric
 
 
 @dataclass
 class CheckResult:
-    table: pd.DataFrame  # one row per (cell, method, metric)
+    table: pd.DataFrame  # one row per (scope, method, outcome)
     only_new: list[str]  # cells
     only_baseline: list[str]
     missing_methods: list[str] = field(default_factory=list)  # "<cell>: method m only in NEW"
     missing_runs: list[str] = field(default_factory=list)  # "<cell>, m: runs 3, 4 only in BASELINE"
 
     @property
+    def decisive(self) -> pd.DataFrame:
+        return self.table[self.table["role"] == "decisive"]
+
+    @property
     def regressed(self) -> bool:
-        return bool((self.table["verdict"] == "regressed").any())
+        return bool((self.decisive["verdict"] == "regressed").any())
+
+    @property
+    def underpowered(self) -> bool:
+        return bool(self.decisive["verdict"].isin(["underpowered", "too few runs"]).any())
+
+    @property
+    def decided(self) -> bool:
+        """Every decisive row regressed, improved, or shown within its margin (equivalent)."""
+        d = self.decisive
+        return bool((d["verdict"].isin(["regressed", "improved"]) | d["equivalent"]).all())
 
     @property
     def missing(self) -> list[str]:
@@ -79,24 +110,10 @@ class CheckResult:
                 + self.missing_methods + self.missing_runs)
 
 
-def holm(p: np.ndarray) -> np.ndarray:
-    """Holm-Bonferroni adjusted p-values."""
-    p = np.asarray(p, dtype=float)
-    m = p.size
-    order = np.argsort(p)
-    adj = np.empty(m)
-    running = 0.0
-    for rank, i in enumerate(order):
-        running = max(running, (m - rank) * p[i])
-        adj[i] = min(1.0, running)
-    return adj
-
-
 def _load(directory, nees: bool = False) -> pd.DataFrame:
-    from tanbench.results import load
-
     runs = load(directory)
-    missing = [c for c in ("method", "run", "seed", "status", *METRICS.values()) if c not in runs.columns]
+    needed = ("method", "run", "seed", "status", lost_metric().name, *(m.name for m in accuracy_metrics()))
+    missing = [c for c in needed if c not in runs.columns]
     if missing:
         raise TanbenchError(f"{directory}: results lack column(s) {', '.join(missing)}; not comparable")
     if nees:
@@ -127,34 +144,162 @@ def _label(row: pd.Series) -> str:
                      for c in TABLE_SCENARIO_COLUMNS if c in row)
 
 
-def _bootstrap_diff(new: np.ndarray, base: np.ndarray, paired: bool, n: int, rng) -> tuple[float, float]:
+@dataclass
+class _Pairs:
+    """One method's runs in one scope (a cell, or the pooled cells), ready to compare."""
+
+    lost_new: np.ndarray
+    lost_base: np.ndarray
+    paired: bool
+    values: dict  # column -> (new values, baseline values, normaliser per baseline value or None)
+
+
+def _pairs(nm: pd.DataFrame, bm: pd.DataFrame, columns: list[str]) -> _Pairs:
+    """Lost flags and accuracy values of one cell and method (accuracy: runs not lost)."""
+    lost = lost_metric().name
+    common = nm.index.intersection(bm.index)
+    paired = len(common) >= 2 and bool((nm.loc[common, "seed"] == bm.loc[common, "seed"]).all())
     if paired:
-        d = new - base
-        means = d[rng.integers(0, d.size, (n, d.size))].mean(axis=1)
+        nm, bm = nm.loc[common], bm.loc[common]
+    ln, lb = nm[lost].astype(bool).to_numpy(), bm[lost].astype(bool).to_numpy()
+    values = {}
+    for col in columns:
+        x, y = nm[col].to_numpy(float), bm[col].to_numpy(float)
+        if paired:
+            keep = ~ln & ~lb & np.isfinite(x) & np.isfinite(y)  # NaN metrics (no covariance) are left out
+            x, y = x[keep], y[keep]
+        else:
+            x, y = x[~ln & np.isfinite(x)], y[~lb & np.isfinite(y)]
+        values[col] = (x, y)
+    return _Pairs(ln, lb, paired, values)
+
+
+def _margin(opt: CheckOptions, metric: str, base_stat: float) -> float:
+    margin_abs = opt.nees_margin_abs if metric == NEES_METRIC[0] else opt.margin_abs
+    return max(opt.margin_rel * base_stat, margin_abs)
+
+
+def _pool(parts: list[_Pairs], opt: CheckOptions, labels: dict) -> _Pairs:
+    """One method's cells as one sample: accuracy values divided by each cell's margin scale
+    (max(baseline mean, abs margin / rel margin)), so the pooled margin is ``margin_rel`` of
+    every cell's baseline mean; lost flags concatenated. Paired only if every cell is."""
+    values = {}
+    for col in parts[0].values:
+        xs, ys = [], []
+        for p in parts:
+            x, y = p.values[col]
+            if y.size == 0:
+                continue
+            m_abs = opt.nees_margin_abs if labels[col] == NEES_METRIC[0] else opt.margin_abs
+            scale = max(float(np.mean(y)), m_abs / opt.margin_rel if opt.margin_rel > 0 else 0.0) or 1.0
+            xs.append(x / scale)
+            ys.append(y / scale)
+        values[col] = (np.concatenate(xs) if xs else np.zeros(0), np.concatenate(ys) if ys else np.zeros(0))
+    return _Pairs(np.concatenate([p.lost_new for p in parts]), np.concatenate([p.lost_base for p in parts]),
+                  all(p.paired for p in parts), values)
+
+
+def _rows(scope: dict, pairs: _Pairs, labels: dict, opt: CheckOptions, pooled: bool, seed: int) -> list[dict]:
+    """The lost-run row and the accuracy rows of one scope and method (tests, intervals, no verdicts)."""
+    out = []
+    ln, lb = pairs.lost_new, pairs.lost_base
+    kn, kb = int(ln.sum()), int(lb.sum())
+    p_worse, p_better = inference.lost_tests(ln, lb, pairs.paired)
+    lo_n, hi_n = inference.clopper_pearson(kn, ln.size)
+    lo_b, hi_b = inference.clopper_pearson(kb, lb.size)
+    rate_n, rate_b = kn / max(ln.size, 1), kb / max(lb.size, 1)
+    if pairs.paired:  # runs lost only in NEW / only in BASELINE: the discordant pairs
+        b, c = int(np.sum(ln & ~lb)), int(np.sum(lb & ~ln))
+        # the change is (b - c) / n: exact bounds of b / n and c / n combined (conservative)
+        lo_bn, hi_bn = inference.clopper_pearson(b, ln.size)
+        lo_cn, hi_cn = inference.clopper_pearson(c, ln.size)
+        change_lo, change_hi = lo_bn - hi_cn, hi_bn - lo_cn
+        equivalent_lost = change_hi < opt.lost_detect
     else:
-        means = (new[rng.integers(0, new.size, (n, new.size))].mean(axis=1)
-                 - base[rng.integers(0, base.size, (n, base.size))].mean(axis=1))
-    lo, hi = np.percentile(means, [2.5, 97.5])
-    return float(lo), float(hi)
+        change_lo, change_hi = lo_n - hi_b, hi_n - lo_b
+        equivalent_lost = change_hi < opt.lost_detect
+    out.append({**scope, "metric": "lost", "statistic": "rate", "paired": pairs.paired,
+                "n_new": int(ln.size), "n_baseline": int(lb.size), "baseline": rate_b, "new": rate_n,
+                "change": rate_n - rate_b, "ci95_low": change_lo, "ci95_high": change_hi,
+                "baseline_ci95": f"{kb}/{lb.size} [{lo_b:.3f}, {hi_b:.3f}]",
+                "new_ci95": f"{kn}/{ln.size} [{lo_n:.3f}, {hi_n:.3f}]",
+                "margin": 0.0, "detect": opt.lost_detect,
+                "p_worse": p_worse, "p_better": p_better, "equivalent": bool(equivalent_lost),
+                "_kind": "lost", "_rate_base": rate_b,
+                "_reshuffled": int(np.sum(lb & ~ln)) if pairs.paired else -1})
+    for col, (x, y) in pairs.values.items():
+        label = labels[col]
+        stats = ["mean"] + ([TAIL] if opt.tail and label != NEES_METRIC[0] else [])
+        for k, stat in enumerate(stats):
+            if x.size == 0 or y.size == 0:
+                continue
+            f = inference.STATISTICS[stat]
+            base_stat, new_stat = float(f(y)), float(f(x))
+            margin = opt.margin_rel if pooled else _margin(opt, label, base_stat)
+            s = seed + 7919 * k
+            lo, hi = inference.bootstrap_change_ci(x, y, pairs.paired, stat, n=opt.bootstrap, seed=s)
+            if pairs.paired and x.size >= 2:  # the noise of these pairs: bootstrap spread of the change
+                rng = np.random.default_rng(s + 1)
+                idx = rng.integers(0, x.size, (opt.bootstrap, x.size))
+                se = float(np.std(f(x[idx], axis=1) - f(y[idx], axis=1), ddof=1))
+            else:  # reseeded runs: the baseline's own spread
+                se = inference.reseed_se(y, stat, x.size)
+            out.append({**scope, "metric": label if stat == "mean" else f"{label} {stat}", "statistic": stat,
+                        "paired": pairs.paired, "n_new": int(x.size), "n_baseline": int(y.size),
+                        "baseline": base_stat, "new": new_stat, "change": new_stat - base_stat,
+                        "ci95_low": lo, "ci95_high": hi, "baseline_ci95": "", "new_ci95": "",
+                        "margin": margin, "detect": 2.0 * margin,
+                        "p_worse": inference.permutation_p(x, y, margin, pairs.paired, stat, opt.permutations, s),
+                        "p_better": inference.permutation_p(y, x, margin, pairs.paired, stat, opt.permutations, s),
+                        "equivalent": False, "_p_noninf":
+                            inference.permutation_p(y, x, -margin, pairs.paired, stat, opt.permutations, s),
+                        "_kind": "accuracy", "_se": se})
+    return out
 
 
-def _one_sided(x: np.ndarray, y: np.ndarray, shift: float, paired: bool) -> float:
-    """p-value that x - y exceeds ``shift`` (one-sided)."""
-    if paired:
-        d = x - y - shift
-        if not np.any(d):
-            return 1.0
-        return float(stats.wilcoxon(d, alternative="greater", zero_method="zsplit").pvalue)
-    if x.size < 2 or y.size < 2:
-        return 1.0
-    return float(stats.mannwhitneyu(x - shift, y, alternative="greater").pvalue)
+def _verdicts(table: pd.DataFrame, opt: CheckOptions, alpha: float) -> pd.DataFrame:
+    """Holm over each family (decisive rows; information rows), MDEs, verdicts, in place."""
+    table["p_worse_holm"] = np.nan
+    table["p_better_holm"] = np.nan
+    table["mde"] = np.nan
+    for role in ("decisive", "info"):
+        fam = table["role"] == role
+        if not fam.any():
+            continue
+        table.loc[fam, "p_worse_holm"] = holm(table.loc[fam, "p_worse"].to_numpy())
+        table.loc[fam, "p_better_holm"] = holm(table.loc[fam, "p_better"].to_numpy())
+        level = alpha / int(fam.sum())  # Bonferroni: the level Holm's first step uses, a safe bound
+        for i in table.index[fam]:
+            r = table.loc[i]
+            if r["_kind"] == "lost":
+                mde = (inference.mde_lost_paired(int(r["n_new"]), int(r["_reshuffled"]), level) if r["paired"] else
+                       inference.mde_lost(r["_rate_base"], int(r["n_new"]), int(r["n_baseline"]), level))
+            else:
+                mde = inference.mde_shift(r["margin"], r["_se"], level)
+                noninf = r["_p_noninf"] * int(fam.sum())  # equivalence (below the margin) at the same level
+                table.loc[i, "equivalent"] = bool(noninf < alpha and r["change"] < r["margin"])
+            table.loc[i, "mde"] = mde
+    worse = (table["p_worse_holm"] < alpha) & (table["change"] > table["margin"])
+    better = (table["p_better_holm"] < alpha) & (table["change"] < -table["margin"])
+    few = np.minimum(table["n_new"], table["n_baseline"]) < opt.min_runs
+    weak = table["mde"] > table["detect"]
+    table["verdict"] = np.select([worse, better, few, weak], ["regressed", "improved", "too few runs", "underpowered"],
+                                 "unchanged")
+    table["equivalent"] = table["equivalent"].astype(bool) & ~worse & ~better
+    return table.drop(columns=[c for c in table.columns if c.startswith("_")])
 
 
-def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResult:
-    """Compare two results directories; see the module docstring."""
+def compare(new_dir, base_dir, options: CheckOptions | None = None, alpha: float | None = None) -> CheckResult:
+    """Compare two results directories; see the module docstring. ``alpha`` overrides the
+    options' level (the sequential check spends it over its looks)."""
     opt = options or CheckOptions()
+    if opt.pool not in ("none", "method"):
+        raise TanbenchError(f"--pool {opt.pool}: use none or method")
     new, base = _load(new_dir, opt.nees), _load(base_dir, opt.nees)
-    metrics = {**METRICS, **(dict([NEES_METRIC]) if opt.nees else {})}
+    labels = {m.name: m.label for m in accuracy_metrics()}
+    if opt.nees:
+        labels[NEES_METRIC[1]] = NEES_METRIC[0]
+    columns = list(labels)
     cols = _scenario_columns(new, base)
     unknown = sorted(set(opt.ignore) - set(cols))
     if unknown:
@@ -165,14 +310,20 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResu
         raise TanbenchError(f"{new_dir} and {base_dir} share no scenario columns; not comparable")
     new = new.assign(_cell=_cell_keys(new, cols))
     base = base.assign(_cell=_cell_keys(base, cols))
+    for name, df in (("NEW", new), ("BASELINE", base)):
+        merged = df.groupby("_cell")["cell_id"].nunique()
+        if (merged > 1).any():
+            ids = sorted(df.loc[df["_cell"] == merged[merged > 1].index[0], "cell_id"].unique())
+            raise TanbenchError(f"--ignore {', '.join(opt.ignore)} makes cells {', '.join(ids)} of {name} one cell; "
+                                f"check compares cell with cell and never averages two: ignore fewer columns")
     cells_new, cells_base = set(new["_cell"]), set(base["_cell"])
 
     def describe(keys, df):
         firsts = df.drop_duplicates("_cell").set_index("_cell")
         return [f"{firsts.loc[k, 'cell_id']} ({_label(firsts.loc[k])})" for k in sorted(keys)]
 
-    rng = np.random.default_rng(opt.seed)
-    rows, missing_methods, missing_runs = [], [], []
+    pooling = opt.pool == "method"
+    rows, missing_methods, missing_runs, by_method = [], [], [], {}
     for key in sorted(cells_new & cells_base):
         n_cell, b_cell = new[new["_cell"] == key], base[base["_cell"] == key]
         cell = f"{n_cell['cell_id'].iloc[0]} ({_label(n_cell.iloc[0])})"
@@ -185,38 +336,20 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None) -> CheckResu
             for side, extra in (("NEW", nm.index.difference(bm.index)), ("BASELINE", bm.index.difference(nm.index))):
                 if len(extra):
                     missing_runs.append(f"{_runs_text(extra)} of {method} only in {side} (ok runs): cell {cell}")
-            common = nm.index.intersection(bm.index)
-            paired = len(common) >= 5 and bool((nm.loc[common, "seed"] == bm.loc[common, "seed"]).all())
-            for metric, column in metrics.items():
-                if paired:
-                    x, y = nm.loc[common, column].to_numpy(float), bm.loc[common, column].to_numpy(float)
-                else:
-                    x, y = nm[column].to_numpy(float), bm[column].to_numpy(float)
-                if paired:  # NaN metrics (a run without a covariance) are left out
-                    keep = np.isfinite(x) & np.isfinite(y)
-                    x, y = x[keep], y[keep]
-                else:
-                    x, y = x[np.isfinite(x)], y[np.isfinite(y)]
-                if x.size == 0 or y.size == 0:
-                    continue
-                margin_abs = opt.nees_margin_abs if metric == NEES_METRIC[0] else opt.margin_abs
-                delta = max(opt.margin_rel * float(np.mean(y)), margin_abs)
-                lo, hi = _bootstrap_diff(x, y, paired, opt.bootstrap, rng)
-                rows.append({
-                    "cell_id": nm["cell_id"].iloc[0], "cell": _label(nm.iloc[0]), "method": method,
-                    "metric": metric, "paired": paired, "n_new": int(x.size), "n_baseline": int(y.size),
-                    "baseline_mean_m": float(np.mean(y)), "new_mean_m": float(np.mean(x)),
-                    "change_m": float(np.mean(x) - np.mean(y)), "ci95_low_m": lo, "ci95_high_m": hi,
-                    "margin_m": delta,
-                    "p_worse": _one_sided(x, y, delta, paired), "p_better": _one_sided(y, x, delta, paired),
-                })
+            pairs = _pairs(nm, bm, columns)
+            by_method.setdefault(method, []).append(pairs)
+            scope = {"role": "info" if pooling else "decisive", "scope": "cell", "cell_id": nm["cell_id"].iloc[0],
+                     "cell": _label(nm.iloc[0]), "method": method}
+            rows += _rows(scope, pairs, labels, opt, False, opt.seed + len(rows))
+    if pooling:
+        for method, parts in sorted(by_method.items()):
+            scope = {"role": "decisive", "scope": "pooled", "cell_id": f"{len(parts)} cells",
+                     "cell": f"pooled over {len(parts)} cells (values / cell baseline mean)", "method": method}
+            rows += _rows(scope, _pool(parts, opt, labels), labels, opt, True, opt.seed + len(rows))
     table = pd.DataFrame(rows)
     if table.empty:
         raise TanbenchError(f"{new_dir} and {base_dir} have no cell and method in common")
-    table["p_worse_holm"] = holm(table["p_worse"].to_numpy())
-    table["p_better_holm"] = holm(table["p_better"].to_numpy())
-    table["verdict"] = np.where(table["p_worse_holm"] < opt.alpha, "regressed",
-                                np.where(table["p_better_holm"] < opt.alpha, "improved", "unchanged"))
+    table = _verdicts(table, opt, opt.alpha if alpha is None else alpha)
     return CheckResult(table=table, only_new=describe(cells_new - cells_base, new),
                        only_baseline=describe(cells_base - cells_new, base),
                        missing_methods=missing_methods, missing_runs=missing_runs)
@@ -229,29 +362,45 @@ def _runs_text(runs) -> str:
     return f"run{'s' if len(runs) > 1 else ''} {shown}"
 
 
+def _num(v: float, rate: bool) -> str:
+    if not np.isfinite(v):
+        return "inf" if v > 0 else "-"
+    return f"{v:.3f}" if rate else f"{v:.2f}"
+
+
 def render(result: CheckResult) -> str:
-    """The compact text table `tanbench check` prints."""
+    """The compact text table `tanbench check` prints: decisive rows first."""
     t = result.table
-    lines = [f"{'verdict':10s} {'method':10s} {'metric':8s} {'baseline':>9s} {'new':>9s} {'change':>8s} "
-             f"{'95% CI':>17s} {'margin':>7s} {'p(worse)':>9s} {'p(better)':>9s}  cell"]
-    for _, r in t.iterrows():
-        lines.append(f"{r['verdict']:10s} {r['method']:10s} {r['metric']:8s} {r['baseline_mean_m']:9.2f} "
-                     f"{r['new_mean_m']:9.2f} {r['change_m']:+8.2f} [{r['ci95_low_m']:+7.2f},{r['ci95_high_m']:+7.2f}] "
-                     f"{r['margin_m']:7.2f} {r['p_worse_holm']:9.2g} {r['p_better_holm']:9.2g}  {r['cell']}"
-                     f"{'' if r['paired'] else ' (unpaired)'}")
+    lines = [f"{'verdict':13s} {'method':10s} {'metric':13s} {'baseline':>9s} {'new':>9s} {'change':>8s} "
+             f"{'95% CI':>17s} {'margin':>7s} {'MDE':>7s} {'p(worse)':>9s} {'p(better)':>9s}  scope"]
+    for role in ("decisive", "info"):
+        part = t[t["role"] == role]
+        if part.empty:
+            continue
+        if role == "info":
+            lines.append("-- per cell, for information (pooling declared; own Holm family, not counted):")
+        for _, r in part.iterrows():
+            rate = r["statistic"] == "rate"
+            ci = f"[{_num(r['ci95_low'], rate):>7s},{_num(r['ci95_high'], rate):>7s}]"
+            lines.append(f"{r['verdict']:13s} {r['method']:10s} {r['metric']:13s} {_num(r['baseline'], rate):>9s} "
+                         f"{_num(r['new'], rate):>9s} {('+' if r['change'] >= 0 else '') + _num(r['change'], rate):>8s} "
+                         f"{ci:>17s} {_num(r['margin'], rate):>7s} {_num(r['mde'], rate):>7s} "
+                         f"{r['p_worse_holm']:9.2g} {r['p_better_holm']:9.2g}  {r['cell']}"
+                         f"{'' if r['paired'] else ' (unpaired)'}")
     for line in result.missing:
         lines.append(f"missing: {line}")
-    counts = t["verdict"].value_counts()
+    counts = result.decisive["verdict"].value_counts()
     lines.append(f"{counts.get('regressed', 0)} regressed, {counts.get('improved', 0)} improved, "
-                 f"{counts.get('unchanged', 0)} unchanged (Holm-corrected p-values); "
+                 f"{counts.get('unchanged', 0)} unchanged, {counts.get('underpowered', 0)} underpowered, "
+                 f"{counts.get('too few runs', 0)} with too few runs (decisive rows, Holm-corrected; "
+                 f"lost: rate of lost runs, exact tests; other metrics: runs not lost, permutation tests "
+                 f"against the margin; MDE: change detected with 80 % power); "
                  f"{len(result.missing)} missing (cells, methods or runs in only one directory)")
     return "\n".join(lines)
 
 
 def write_report(result: CheckResult, path: Path) -> None:
     """Write the comparison as .parquet, .md or .json (by extension)."""
-    from tanbench.results import to_markdown
-
     path = Path(path)
     suffix = path.suffix.lower()
     try:
@@ -263,9 +412,25 @@ def write_report(result: CheckResult, path: Path) -> None:
         elif suffix == ".json":
             path.write_text(json.dumps({"rows": json.loads(result.table.to_json(orient="records")),
                                         "only_new": result.only_new, "only_baseline": result.only_baseline,
-                                        "missing": result.missing,
-                                        "regressed": result.regressed}, indent=1))
+                                        "missing": result.missing, "regressed": result.regressed,
+                                        "underpowered": result.underpowered}, indent=1))
         else:
             raise TanbenchError(f"--report {path}: use a .parquet, .md or .json file name")
     except OSError as exc:
         raise TanbenchError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def looks(start: int, batch: int, cap: int) -> list[int]:
+    """Run counts at which the sequential check looks: start, start + batch, ..., cap."""
+    if batch < 1 or cap < start:
+        raise TanbenchError(f"--batch {batch} / --cap {cap}: need batch >= 1 and cap >= the runs stored ({start})")
+    counts = list(range(start, cap, batch)) + [cap]
+    return sorted(set(counts))
+
+
+def spend(alpha: float, n_looks: int) -> float:
+    """The level of each look: alpha spent evenly over the planned looks (Bonferroni over looks,
+    valid whatever the stopping rule, since the chance of any false verdict at any look is at
+    most the sum of the looks' levels)."""
+    return alpha / max(n_looks, 1)
+

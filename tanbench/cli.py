@@ -178,7 +178,8 @@ def _warn_incomplete(sweep, directory: Path) -> None:
 
 def _compact(table):
     keep = [c for c in table.columns if c not in ("ci95_low_m", "ci95_high_m", "min_time_avg_error_m",
-                                                   "max_time_avg_error_m", "std_final_error_m", "nees_below_95")]
+                                                   "max_time_avg_error_m", "std_final_error_m", "nees_below_95",
+                                                   "time_avg_ci95_low_m", "time_avg_ci95_high_m", "n_diverged")]
     return table[keep]
 
 
@@ -574,6 +575,16 @@ def check(
     allow_missing: bool = typer.Option(False, "--allow-missing",
                                        help="Pass even if cells, methods or runs are in only one directory "
                                             "(they are still listed)."),
+    allow_underpowered: bool = typer.Option(False, "--allow-underpowered",
+                                            help="Pass even if rows could not detect their margin (twice the "
+                                                 "margin; lost runs: --lost-detect) or have too few runs "
+                                                 "(they are still listed as such)."),
+    pool: str = typer.Option("none", "--pool", help="none, or method: the verdict pools each method over the "
+                             "matched cells (values / the cell's baseline mean); cell rows shown for information."),
+    lost_detect: float = typer.Option(0.05, "--lost-detect", min=1e-6, max=1.0,
+                                      help="Increase of the lost-run rate every lost-run row must be able to "
+                                           "detect (0.05: 5 more lost runs in 100)."),
+    min_runs: int = typer.Option(10, "--min-runs", min=2, help="Fewer runs in a row: reported as too few runs."),
     nees: bool = typer.Option(False, "--nees", help="Also regress on consistency: the fraction of updates whose "
                               "NEES lies outside its 95 % chi-square bounds."),
     nees_margin: float = typer.Option(0.05, "--nees-margin", min=0.0, max=1.0,
@@ -581,11 +592,24 @@ def check(
     ignore: Optional[list[str]] = typer.Option(
         None, "--ignore", help="A scenario column left out of the cell match (repeat for several): compares cells "
                                "that differ only there, e.g. --ignore filter.random_numbers."),
+    until_decisive: bool = typer.Option(False, "--until-decisive",
+                                        help="Add runs to both directories (their own sweep.yaml, same seeds) in "
+                                             "batches until every row is decided or --cap; alpha is spent "
+                                             "evenly over the planned looks."),
+    batch: int = typer.Option(30, "--batch", min=1, help="Runs per cell added at each look (--until-decisive)."),
+    cap: int = typer.Option(300, "--cap", min=1, help="Most runs per cell (--until-decisive)."),
 ):
     from tanbench.check import CheckOptions, compare, render, write_report
 
-    result = compare(new, baseline, CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha,
-                                                 nees=nees, nees_margin_abs=nees_margin, ignore=tuple(ignore or ())))
+    opts = CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha, nees=nees,
+                        nees_margin_abs=nees_margin, ignore=tuple(ignore or ()), pool=pool,
+                        lost_detect=lost_detect, min_runs=min_runs)
+    if until_decisive:
+        from tanbench.runner.sequential import until_decisive as run_until
+
+        result = run_until(new, baseline, opts, batch, cap, echo=typer.echo)
+    else:
+        result = compare(new, baseline, opts)
     typer.echo(render(result))
     if report is not None:
         write_report(result, report)
@@ -593,7 +617,11 @@ def check(
     if result.missing and not allow_missing:
         typer.echo(f"check fails: {len(result.missing)} cell(s), method(s) or run(s) are in only one directory "
                    f"(listed above as 'missing:'; --allow-missing compares only what both hold)", err=True)
-    if result.regressed or (result.missing and not allow_missing):
+    if result.underpowered and not allow_underpowered:
+        typer.echo("check fails: some rows could not have detected their margin (underpowered) or have too few "
+                   "runs; add runs (--until-decisive) or pass --allow-underpowered to accept it", err=True)
+    if (result.regressed or (result.missing and not allow_missing)
+            or (result.underpowered and not allow_underpowered)):
         raise typer.Exit(1)
 
 

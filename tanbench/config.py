@@ -414,6 +414,19 @@ class FaultSpec(_Strict):
     dropout_mean_pings: float = Field(10.0, ge=1, description="mean length of a dropout, pings")
     outlier_fraction: float = Field(0.0, ge=0, lt=1, description="fraction of wild ranges")
     sound_speed_scale_error: float = Field(0.0, gt=-0.2, lt=0.2, description="range scale error")
+    # the check's mutation faults (issue 22; docs/model.md, Section 4.1): off, they change no key and no number
+    map_offset_east_m: float = new_option(0.0, ge=-500, le=500,
+                                          description="the seafloor lies this far east of where the map has it, m")
+    map_offset_north_m: float = new_option(0.0, ge=-500, le=500,
+                                           description="the seafloor lies this far north of where the map has it, m")
+    sonar_latency_pings: int = new_option(0, ge=0, le=100,
+                                          description="ranges reported this many pings late (the first pings: none)")
+    range_noise_scale: float = new_option(1.0, gt=0, le=100,
+                                          description="true range noise / the noise the methods assume (noise_m)")
+    far_start_fraction: float = new_option(0.0, ge=0, le=1,
+                                           description="fraction of runs whose navigation starts far off")
+    far_start_m: float = new_option(300.0, ge=0, le=5000,
+                                    description="how far off those runs start (random direction), m")
 
 
 class Scenario(_Strict):

@@ -210,7 +210,9 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
         parts.append(f"* the anatomy of the differences: `{anatomy}` (`configs/zhou2017-anatomy.yaml`)")
     parts += ["", "## The paper's claims", "",
               "Each claim is a test in `tests/test_paper_claims.py` on these results (one-sided tests at 1 %; "
-              "paired Wilcoxon where runs share their vehicle data, Mann-Whitney otherwise).", ""]
+              "the trends and orderings test the paper's statistic, the mean, by permutation tests: paired "
+              "where runs share their vehicle data; lost runs reported beside; a rank test (Wilcoxon / "
+              "Mann-Whitney) that disagrees is reported and not counted).", ""]
     if lit_claims is not None:
         parts += ["| claim | statement | literal profile | recommended profile |", "|---|---|---|---|"]
         lit_by_key = {c.key: c for c in lit_claims}

@@ -16,8 +16,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from tanbench.errors import TanbenchError
 from tanbench import store
+from tanbench.errors import TanbenchError
+from tanbench.inference import clopper_pearson, p90
+from tanbench.metrics.consistency import cell_verdict, mc_bounds, nees
+from tanbench.metrics.declarations import METRICS
 
 # the scenario columns every table shows (the paper's Tables 3-7 columns)
 TABLE_SCENARIO_COLUMNS = ["area", "map_resolution_m", "noise_m", "sampling_time_s", "particles"]
@@ -95,7 +98,8 @@ SUMMARY_EXTRA_COLUMNS = ("divergence_rate", "mean_filter_wall_s")
 
 
 def summarize(df: pd.DataFrame, by=("cell_id", "method"), columns=()) -> pd.DataFrame:
-    """Per group: n_runs and the statistics of the final and time-averaged errors.
+    """Per group: n_runs and the statistics of the final and time-averaged errors, the lost-run
+    rate with its exact interval, and the declared summaries of further metrics.
 
     ``columns``: further columns of :data:`SUMMARY_EXTRA_COLUMNS` (a sweep's ``table_columns``):
     ``divergence_rate`` (n_diverged / n_runs) and ``mean_filter_wall_s`` (the filter's wall
@@ -125,6 +129,8 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method"), columns=()) -> pd.Data
             "mean_final_heading_error_deg": float(ok["final_heading_error_deg"].mean()) if f.size else np.nan,
             "n_diverged": int(ok["diverged"].astype(bool).sum()),
             "n_failed": int((g["status"] != "ok").sum()),
+            **_two_part_columns(ok),
+            **_declared_columns(ok),
             **_consistency_columns(ok),
             **_efficiency_columns(ok),
         })
@@ -135,10 +141,30 @@ def summarize(df: pd.DataFrame, by=("cell_id", "method"), columns=()) -> pd.Data
     return pd.DataFrame(rows)
 
 
+def _two_part_columns(ok: pd.DataFrame) -> dict:
+    """The two parts of the outcome (docs/results.md, "Verdicts"): the lost-run rate (``diverged``,
+    docs/model.md 6.5) with its exact Clopper-Pearson 95 % interval; the time-averaged error's
+    bootstrap 95 % interval; the tail (90th percentile) of the final and time-averaged errors."""
+    lost = ok["diverged"].astype(bool).to_numpy() if len(ok) else np.zeros(0, bool)
+    lo, hi = clopper_pearson(int(lost.sum()), lost.size)
+    ta = ok["mean_horizontal_error_m"].to_numpy(dtype=float) if len(ok) else np.zeros(0)
+    f = ok["final_horizontal_error_m"].to_numpy(dtype=float) if len(ok) else np.zeros(0)
+    ta_lo, ta_hi = bootstrap_ci(ta)
+    return {"lost_rate": float(lost.mean()) if lost.size else np.nan, "lost_ci95_low": lo, "lost_ci95_high": hi,
+            "time_avg_ci95_low_m": ta_lo, "time_avg_ci95_high_m": ta_hi,
+            "p90_final_error_m": float(p90(f)) if f.size else np.nan,
+            "p90_time_avg_error_m": float(p90(ta)) if ta.size else np.nan}
+
+
+def _declared_columns(ok: pd.DataFrame) -> dict:
+    """``mean_<name>`` of every metric declared with ``summary="mean"`` that the runs have."""
+    return {f"mean_{m.name}": float(np.nanmean(ok[m.name].to_numpy(dtype=float)))
+            if len(ok) and np.isfinite(ok[m.name].to_numpy(dtype=float)).any() else np.nan
+            for m in METRICS if m.summary == "mean" and m.name in ok.columns}
+
+
 def _consistency_columns(ok: pd.DataFrame) -> dict:
     """NEES summaries of a group of runs (results without NEES columns get none)."""
-    from tanbench.metrics.consistency import cell_verdict
-
     if "nees_above_95" not in ok.columns:
         return {}
     above = ok["nees_above_95"].to_numpy(dtype=float)
@@ -211,8 +237,6 @@ def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
     and headings: the mean; ``filter_std_m_mean``: the mean of the filter's horizontal
     spread sqrt(var_e + var_n). ``n_runs`` counts the runs at each time.
     """
-    from tanbench.metrics.consistency import nees
-
     allruns = pd.concat(frames, ignore_index=True)
     allruns = allruns.assign(**{f"{c}_abs": allruns[c].abs() for c in SUMMARY_ERRORS},
                              filter_std_m=np.sqrt(allruns["var_e"] + allruns["var_n"]),
@@ -233,8 +257,6 @@ def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
         stats.update({f"{col}_p{p:02d}": g.quantile(p / 100.0) for p in PERCENTILES})
         parts.append(pd.DataFrame(stats))
     out = pd.concat(parts, axis=1).reset_index()
-    from tanbench.metrics.consistency import mc_bounds
-
     out["nees_mc_low"], out["nees_mc_high"] = mc_bounds(out["n_runs"].to_numpy())
     floats = [c for c in out.columns if c not in ("cell_id", "method", "n_runs")]
     return out.astype({c: "float32" for c in floats})

@@ -15,16 +15,11 @@ from functools import lru_cache
 import pyarrow as pa
 from pydantic import BaseModel
 
-# per-run metric names, in the order results tables show them
-METRIC_COLUMNS = (
-    "final_horizontal_error_m", "mean_horizontal_error_m", "rmse_after_convergence_m",
-    "final_heading_error_deg", "convergence_time_s", "diverged", "reinitialisations",
-    "final_east_error_m", "final_north_error_m", "filter_wall_s",
-    # divergence recovery and the loose TAN's fixes (scoring.recovery_stats)
-    "recoveries", "first_reinit_s", "mean_recovery_s", "left_map", "fixes_accepted", "fixes_rejected",
-    # consistency (metrics.consistency) and efficiency against the bound (bounds.pcrb): metrics.run_metrics
-    "nees_mean_after_convergence", "nees_above_95", "nees_below_95", "pcrb_after_convergence_m", "rmse_pcrb_ratio",
-)
+from tanbench.config import Scenario
+from tanbench.metrics.declarations import METRICS
+
+# per-run metric names, in the order results tables show them (declared in metrics.declarations)
+METRIC_COLUMNS = tuple(m.name for m in METRICS)
 
 # the per-update series stored for every run (float32): the scored ones every method has
 SERIES_COLUMNS = (
@@ -37,12 +32,11 @@ SERIES_COLUMNS = (
 # Arrow types of a run row's columns. They are fixed (the scenario parameters' from the
 # Scenario model's annotations), so every run file has the same schema whatever its
 # values (a failed run's missing metrics, a parameter left at None) and
-# ``pd.read_parquet(DIR / "runs")`` can read them together. Metrics not listed are float64.
+# ``pd.read_parquet(DIR / "runs")`` can read them together. Metric types are declared with the metrics.
 # (``cell_id`` is not among them: it is the Hive partition, in the directory name)
 ID_TYPES = {"sweep": pa.string(), "tables": pa.string(), "method": pa.string(),
             "run": pa.int64(), "seed": pa.int64(), "filter_seed": pa.int64()}
-METRIC_TYPES = {"diverged": pa.bool_(), "reinitialisations": pa.int64(), "recoveries": pa.int64(),
-                "left_map": pa.bool_(), "fixes_accepted": pa.int64(), "fixes_rejected": pa.int64()}
+METRIC_TYPES = {m.name: m.arrow for m in METRICS}
 TAIL_TYPES = {"status": pa.string(), "error": pa.string(), "wall_s": pa.float64()}
 
 
@@ -75,8 +69,6 @@ def _arrow_type(annotation) -> pa.DataType:
 @lru_cache(maxsize=1)
 def scenario_column_types() -> dict[str, pa.DataType]:
     """Every flattened scenario parameter (``filter.resampling``) and its Arrow type, in model order."""
-    from tanbench.config import Scenario
-
     def walk(model, prefix):
         out = {}
         for name, info in model.model_fields.items():

@@ -11,13 +11,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tanbench.metrics.declarations import RunScore, compute_all
+from tanbench.metrics.run_metrics import score_consistency_and_bound
 from tanbench.terrain import navigation_map
 from tanbench.vehicle.attitude import wrap_pi, yaw_to_heading_deg
 
 
 @dataclass
 class RunResult:
-    """Per-run metrics (dict of scalars) and per-update series (dict of equal-length arrays)."""
+    """Per-run metrics (dict of scalars, :data:`tanbench.metrics.declarations.METRICS`) and per-update
+    series (dict of equal-length arrays)."""
 
     metrics: dict
     series: dict
@@ -54,8 +57,6 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
     the scenario's). ``vehicle`` has the observations (``obs``) and the truth (``truth``:
     t, pos, yaw at the IMU samples), simulated or a mission log's reference.
     """
-    from tanbench.metrics.run_metrics import score_consistency_and_bound
-
     truth, nav = vehicle.truth, vehicle.obs.nav
     upd = updates.imu
     t = truth.t[upd]
@@ -86,30 +87,16 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
     recoveries, first_reinit, mean_recovery = recovery_stats(t, reinit, np.asarray(healthy) > 0.5,
                                                              f.divergence_steps)
     nmap = nmap if nmap is not None else navigation_map(scenario.terrain, scenario.map_resolution_m)
-    metrics = {
-        "final_horizontal_error_m": float(err_h[-1]),
-        "mean_horizontal_error_m": float(err_h.mean()),
-        "rmse_after_convergence_m": rmse,
-        "final_heading_error_deg": float(abs(heading_err[-1])),
-        "convergence_time_s": conv_time,
-        "diverged": bool(err_h[-1] > f.divergence_threshold_m),
-        "reinitialisations": int(reinit.sum()),
-        "final_east_error_m": float(err_e[-1]),
-        "final_north_error_m": float(err_n[-1]),
-        "filter_wall_s": float(wall),
-        "recoveries": recoveries,
-        "first_reinit_s": first_reinit,
-        "mean_recovery_s": mean_recovery,
-        "left_map": bool((~nmap.contains(out.east, out.north)).any()),
-        "fixes_accepted": int(np.sum(out.extra.get("fix_accepted", 0))),
-        "fixes_rejected": int(np.sum(out.extra.get("fix_rejected", 0))),
-    }
     var_e = out.var_e if out.var_e is not None else nan
     var_n = out.var_n if out.var_n is not None else nan
     cov_en = out.cov_en if out.cov_en is not None else nan
     consistency, bound_series = score_consistency_and_bound(scenario, method, t, err_e, err_n, var_e, var_n,
                                                             cov_en, conv_time, rmse, bound)
-    metrics.update(consistency)
+    run = RunScore(t=t, err_e=err_e, err_n=err_n, err_h=err_h, heading_err=heading_err, reinit=reinit,
+                   left_map=bool((~nmap.contains(out.east, out.north)).any()), filter=f, wall=float(wall),
+                   conv_time=conv_time, rmse=rmse, recovery=(recoveries, first_reinit, mean_recovery),
+                   extra=out.extra, consistency=consistency)
+    metrics = compute_all(run)
     series = {
         "t": t,
         "est_e": out.east, "est_n": out.north, "est_u": np.asarray(est_up, dtype=float),

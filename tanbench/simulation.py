@@ -23,7 +23,8 @@ from tanbench.config import Scenario
 from tanbench.errors import TanbenchError
 from tanbench.navigation.ins import run_strapdown
 from tanbench.sensors.dvl import measure_velocity
-from tanbench.sensors.faults import add_current, add_outliers, dropout_mask, tide_offset
+from tanbench.sensors.faults import (add_current, add_outliers, delay_pings, dropout_mask, far_start_offset,
+                                     map_offset_positions, tide_offset)
 from tanbench.sensors.imu import ImuErrors, measure_imu
 from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
@@ -35,6 +36,7 @@ from tanbench.vehicle.attitude import yaw_to_heading_deg
 STREAM_INITIAL, STREAM_IMU, STREAM_DVL_VELOCITY, STREAM_DVL_RANGES, STREAM_SBE_RANGES, STREAM_PRESSURE = range(6)
 # world faults (sensors/faults.py): new streams, so faults off leave every number above unchanged
 STREAM_TIDE, STREAM_DROPOUT, STREAM_DVL_OUTLIERS, STREAM_SBE_OUTLIERS = range(6, 10)
+STREAM_FAR_START = 10
 MIN_ALTITUDE_M = 1.0
 
 
@@ -133,18 +135,24 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
         phase = stream(STREAM_TIDE).uniform(0.0, 2.0 * math.pi)
         depth = depth + tide_offset(truth.t, fl.tide_bias_m, fl.tide_amplitude_m, fl.tide_period_s, phase)
     speed_scale = 1.0 + fl.sound_speed_scale_error
+    true_noise = scenario.noise_m * fl.range_noise_scale if fl.range_noise_scale != 1.0 else scenario.noise_m
     dvl_ranges = measure_ranges(dvl_true * speed_scale if fl.sound_speed_scale_error else dvl_true,
-                                scenario.noise_m, stream(STREAM_DVL_RANGES))
+                                true_noise, stream(STREAM_DVL_RANGES))
     sbe_ranges = measure_ranges(sbe_true * speed_scale if fl.sound_speed_scale_error else sbe_true,
-                                scenario.noise_m, stream(STREAM_SBE_RANGES))
+                                true_noise, stream(STREAM_SBE_RANGES))
     dvl_ranges = add_outliers(dvl_ranges, fl.outlier_fraction, s.max_range_m, stream(STREAM_DVL_OUTLIERS))
     sbe_ranges = add_outliers(sbe_ranges, fl.outlier_fraction, s.max_range_m, stream(STREAM_SBE_OUTLIERS))
     if lost.any():
         dvl_ranges = np.where(lost[:, None], np.nan, dvl_ranges)
+    if fl.sonar_latency_pings:
+        dvl_ranges = delay_pings(dvl_ranges, fl.sonar_latency_pings)
+        sbe_ranges = delay_pings(sbe_ranges, fl.sonar_latency_pings)
 
     nav_cfg = scenario.navigation
     init = stream(STREAM_INITIAL)
     pos_err = init.uniform(-0.5, 0.5, 2) * nav_cfg.initial_position_error_m
+    if fl.far_start_fraction:
+        pos_err = pos_err + far_start_offset(fl.far_start_fraction, fl.far_start_m, stream(STREAM_FAR_START))
     yaw_err = -math.radians(nav_cfg.initial_heading_error_deg)  # heading is -yaw
     # A GPS-aided alignment at the surface estimates the accelerometers' turn-on bias (it
     # is observable there, unlike submerged); the in-run part and the noise remain.
@@ -194,7 +202,7 @@ def noise_free_world(world_json: str):
     check_track_on_map(truth, tmap)
     ping_step = int(round(s.imu_rate_hz / s.sonar_rate_hz))
     ping_idx = np.arange(0, truth.t.size, ping_step)
-    p = truth.pos[ping_idx]
+    p = map_offset_positions(truth.pos[ping_idx], fl.map_offset_east_m, fl.map_offset_north_m)
     args = (p, truth.pitch[ping_idx], truth.roll[ping_idx], truth.yaw[ping_idx])
     bw = s.beam_footprint
     dvl = true_ranges(tmap, *args, dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg),

@@ -41,12 +41,13 @@ def test_holm_matches_definition():
 
 
 def test_identical_inputs_nothing_regressed():
-    """The baseline against itself: every comparison paired and unchanged."""
+    """The baseline against itself: every comparison paired and unchanged (or, for the lost-run
+    rows of 80-run cells, underpowered: never regressed)."""
     result = compare(BASELINE, BASELINE)
     assert not result.regressed
-    assert set(result.table["verdict"]) == {"unchanged"}
+    assert set(result.table["verdict"]) <= {"unchanged", "underpowered"}
     assert result.table["paired"].all()
-    assert (result.table["change_m"] == 0).all()
+    assert (result.table["change"] == 0).all()
     assert not result.only_new and not result.only_baseline
 
 
@@ -115,7 +116,8 @@ def test_margin_options_change_the_verdict(copy_of_baseline):
 def test_cli_exit_codes_and_report(copy_of_baseline, tmp_path):
     """Exit 0 when nothing regressed, 1 when something did; --report writes md/json/parquet."""
     runner = CliRunner()
-    ok = runner.invoke(app, ["check", str(copy_of_baseline), str(BASELINE), "--report", str(tmp_path / "r.json")])
+    ok = runner.invoke(app, ["check", str(copy_of_baseline), str(BASELINE), "--report", str(tmp_path / "r.json"),
+                             "--allow-underpowered"])
     assert ok.exit_code == 0, ok.output
     assert "0 regressed" in ok.output
     assert (tmp_path / "r.json").exists()
@@ -172,6 +174,6 @@ def test_ignore_matches_cells_that_differ_only_there(copy_of_baseline):
         compare(copy_of_baseline, BASELINE)
     result = compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("filter.random_numbers",)))
     assert not result.missing and not result.regressed
-    assert (result.table["verdict"] == "unchanged").all() and len(result.table) == 18
+    assert (result.table["verdict"] != "regressed").all() and len(result.table) == 9 * 5
     with pytest.raises(TanbenchError, match="--ignore filter.no_such_option: not a scenario column"):
         compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("filter.no_such_option",)))

@@ -70,7 +70,7 @@ def test_series_carry_nees_and_the_bound(results):
 
 def test_check_regresses_on_nees(results, tmp_path):
     same = compare(results, results, CheckOptions(nees=True))
-    assert set(same.table["metric"]) == {"final", "time-avg", "nees"}
+    assert set(same.table["metric"]) == {"lost", "final", "final p90", "time-avg", "time-avg p90", "nees"}
     assert not same.regressed
     worse = tmp_path / "worse"
     shutil.copytree(results, worse, ignore=shutil.ignore_patterns(".work"))
@@ -79,9 +79,11 @@ def test_check_regresses_on_nees(results, tmp_path):
         df = pq.read_table(path).to_pandas()
         df["nees_above_95"] = np.minimum(df["nees_above_95"] + 0.3, 1.0)
         store.write_parquet(df, path, meta)
-    result = compare(worse, results, CheckOptions(nees=True))
+    # a few runs per cell: the tails left out so that Holm's family (lost, final, time-avg, nees per
+    # cell and method) leaves the paired permutation test room to reach alpha
+    result = compare(worse, results, CheckOptions(nees=True, tail=False))
     t = result.table
-    assert (t[t["metric"] != "nees"]["verdict"] == "unchanged").all()
+    assert (t[t["metric"] != "nees"]["verdict"] != "regressed").all()
     assert result.regressed and set(t[t["verdict"] == "regressed"]["metric"]) == {"nees"}
     assert not compare(worse, results).regressed  # without --nees the errors alone did not change
 

@@ -68,3 +68,27 @@ def add_outliers(ranges: np.ndarray, fraction: float, max_range: float, rng) -> 
     wild = rng.random(ranges.shape) < fraction
     values = rng.uniform(0.0, max_range, ranges.shape)
     return np.where(wild & ~np.isnan(ranges), values, ranges)
+
+
+def map_offset_positions(pos: np.ndarray, east_m: float, north_m: float) -> np.ndarray:
+    """Positions at which to read a map whose seafloor lies (east, north) metres off: pos - offset."""
+    if not east_m and not north_m:
+        return pos
+    return pos - np.array([east_m, north_m, 0.0])
+
+
+def delay_pings(ranges: np.ndarray, pings: int) -> np.ndarray:
+    """``ranges`` (pings, beams) reported ``pings`` pings late: row k holds row k - pings, NaN before."""
+    out = np.full_like(ranges, np.nan)
+    if pings < ranges.shape[0]:
+        out[pings:] = ranges[:ranges.shape[0] - pings]
+    return out
+
+
+def far_start_offset(fraction: float, distance_m: float, rng) -> np.ndarray:
+    """(east, north) offset of the navigation's start: ``distance_m`` in a random direction with
+    probability ``fraction``, else zero (two draws from ``rng`` either way)."""
+    u, heading = rng.random(), rng.uniform(0.0, 2.0 * math.pi)
+    if u >= fraction:
+        return np.zeros(2)
+    return distance_m * np.array([math.cos(heading), math.sin(heading)])
