@@ -25,6 +25,7 @@ from tanbench.navigation.ins import run_strapdown
 from tanbench.sensors.dvl import measure_velocity
 from tanbench.sensors.faults import add_current, add_outliers, dropout_mask, tide_offset
 from tanbench.sensors.imu import ImuErrors, measure_imu
+from tanbench.sensors.multibeam import measure_swath, sensor_fan
 from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
 from tanbench.terrain import truth_map
@@ -34,6 +35,8 @@ from tanbench.vehicle.trajectory import MotionPlan, Truth, paper_plan, simulate_
 STREAM_INITIAL, STREAM_IMU, STREAM_DVL_VELOCITY, STREAM_DVL_RANGES, STREAM_SBE_RANGES, STREAM_PRESSURE = range(6)
 # world faults (sensors/faults.py): new streams, so faults off leave every number above unchanged
 STREAM_TIDE, STREAM_DROPOUT, STREAM_DVL_OUTLIERS, STREAM_SBE_OUTLIERS = range(6, 10)
+# the multibeam (sensors/multibeam.py): its own streams, so switching it on changes no other number
+STREAM_MBE_ANGLES, STREAM_MBE_RANGES, STREAM_MBE_OUTLIERS = range(10, 13)
 MIN_ALTITUDE_M = 1.0
 
 
@@ -68,6 +71,8 @@ class Observations:
     dvl_ranges: np.ndarray  # (pings, 4) measured ranges, NaN = no bottom
     sbe_ranges: np.ndarray  # (pings, 1)
     nav: NavSolution
+    mbe_beams: np.ndarray | None = None  # (N, 3) the multibeam's nominal fan; None without a multibeam
+    mbe_ranges: np.ndarray | None = None  # (pings, N) at the DVL pings, NaN rows where it did not ping
 
 
 @dataclass
@@ -140,6 +145,11 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
     sbe_ranges = add_outliers(sbe_ranges, fl.outlier_fraction, s.max_range_m, stream(STREAM_SBE_OUTLIERS))
     if lost.any():
         dvl_ranges = np.where(lost[:, None], np.nan, dvl_ranges)
+    mbe_beams = mbe_ranges = None
+    if s.multibeam_beams:
+        mbe_beams = sensor_fan(s)[1]
+        mbe_ranges = measure_swath(scenario, truth, ping_idx, lost if lost.any() else None, stream(STREAM_MBE_ANGLES),
+                                   stream(STREAM_MBE_RANGES), stream(STREAM_MBE_OUTLIERS))
 
     nav_cfg = scenario.navigation
     init = stream(STREAM_INITIAL)
@@ -155,7 +165,8 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
         t=truth.t, dt=truth.dt, latitude_rad=truth.latitude_rad, gyro=gyro, accel=accel,
         dvl_velocity=dvl_velocity, depth=depth, ping_idx=ping_idx,
         dvl_beams=dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg), sbe_beams=altimeter_beam_vectors(),
-        dvl_ranges=dvl_ranges, sbe_ranges=sbe_ranges, nav=NavSolution(pos, pitch, roll, yaw))
+        dvl_ranges=dvl_ranges, sbe_ranges=sbe_ranges, nav=NavSolution(pos, pitch, roll, yaw),
+        mbe_beams=mbe_beams, mbe_ranges=mbe_ranges)
     return VehicleData(obs=obs, truth=truth, imu_errors=imu_errors, dvl_scale_error=scale,
                        initial_position_error=pos_err, initial_heading_error_deg=nav_cfg.initial_heading_error_deg)
 

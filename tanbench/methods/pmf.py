@@ -30,7 +30,9 @@ class PmfOptions(BaseModel):
         0.25, ge=0, description="heading random walk between slices (stands for the gyro-bias drift)")
 
 
-def run_pmf(ctx: MethodContext, sensor: str) -> MethodOutput:
+def run_pmf(ctx: MethodContext, sensor: str, sonar=None) -> MethodOutput:
+    """The PMF weighted by ``sensor``'s beams ("dvl", "sbe"), or by ``sonar`` = (beams (m, 3), ranges at
+    the updates (K, m)) when given (the multibeam methods, methods/multibeam.py)."""
     from tanbench.filters.pmf import run_pmf as pmf_driver
     from tanbench.filters.propagate import position_noise
     from tanbench.options import DISTANCE_INNOVATION
@@ -40,6 +42,8 @@ def run_pmf(ctx: MethodContext, sensor: str) -> MethodOutput:
     T = sc.sampling_time_s
     beams = obs.dvl_beams if sensor == "dvl" else obs.sbe_beams
     ranges = (obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows]
+    if sonar is not None:
+        beams, ranges = sonar
     out = pmf_driver(
         nav.pos[upd, :2], nav.pos[upd, 2], nav.pitch[upd], nav.roll[upd], nav.yaw[upd], beams, ranges,
         ctx.nmap.kernel_args(), ctx.rng, cells=o.cells, headings=o.headings, heading_span_deg=o.heading_span_deg,

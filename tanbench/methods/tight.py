@@ -116,7 +116,9 @@ def divergence_bundle(f):
     return Divergence(f.divergence_sigma, f.divergence_steps)
 
 
-def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
+def run_tight(ctx: MethodContext, sensor: str, sonar=None) -> MethodOutput:
+    """The tight PF weighted by ``sensor``'s beams ("dvl", "sbe"), or by ``sonar`` = (beams (m, 3),
+    ranges at the updates (K, m)) when given (the multibeam methods, methods/multibeam.py)."""
     from tanbench.filters.cloud import gaussian_horizontal
     from tanbench.filters.params import TightModel, TightPrior
     from tanbench.filters.propagate import position_noise
@@ -132,6 +134,8 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     T = sc.sampling_time_s
     beams = obs.dvl_beams if sensor == "dvl" else obs.sbe_beams
     ranges = (obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows]
+    if sonar is not None:
+        beams, ranges = sonar
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
     dist_mode = DISTANCE_INNOVATION[f.distance_innovation]
     sig_d, sig_u = measurement_sigmas(f)

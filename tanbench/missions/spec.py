@@ -114,8 +114,9 @@ class BeamGeometry(_Strict):
         if self.tilt_deg is not None:
             return dvl_beam_vectors(self.tilt_deg, self.azimuths_deg)  # angles are frame-free
         if self.across_track_deg is not None:
-            a = np.radians(np.asarray(self.across_track_deg, dtype=float))
-            return np.stack([np.sin(a), np.zeros_like(a), -np.cos(a)], axis=1)
+            from tanbench.sensors.multibeam import fan_vectors
+
+            return fan_vectors(self.across_track_deg)
         return to_rfu(np.asarray(self.vectors, dtype=float), body_frame)
 
     @property

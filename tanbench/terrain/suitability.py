@@ -333,12 +333,16 @@ def _terrain_label(sc) -> str:
     return f"{t.layout}-seed{t.seed}" if t.kind == "synthetic" else "file"
 
 
-def sensor_beams(sensor: str, scenario=None) -> np.ndarray:
-    """Body-frame beams of ``dvl`` (the scenario's Janus geometry) or ``sbe``."""
+def sensor_beams(sensor: str, scenario=None, sensors=None) -> np.ndarray:
+    """Body-frame beams of ``dvl`` (the scenario's Janus geometry), ``sbe`` or ``mbe`` (the multibeam's fan
+    of ``sensors``, a ``SensorSpec``, or the scenario's)."""
     from tanbench.config import SensorSpec
+    from tanbench.sensors.multibeam import sensor_fan
     from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
 
-    s = scenario.sensors if scenario is not None else SensorSpec()
+    s = sensors if sensors is not None else scenario.sensors if scenario is not None else SensorSpec()
+    if sensor == "mbe":
+        return sensor_fan(s)[1]
     return dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg) if sensor == "dvl" else altimeter_beam_vectors()
 
 
