@@ -719,6 +719,11 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
         typer.echo(f"  {method} passes (ns per particle, thread CPU, a mid-run cloud):")
         for name, ns in kernels.items():
             typer.echo(f"    {name:<58} {ns:7.1f}")
+    mb = figures["multibeam"]
+    typer.echo(f"  multibeam likelihood (tight PF pass, {mb['beams']}-beam fan, map-aware Student-t, thread CPU): "
+               f"{mb['ns_per_particle_beam_jit']:.2f} ns per particle-beam jitted, "
+               f"{mb['ns_per_particle_beam_numpy']:.2f} numpy ({mb['numpy_ratio']:.1f} x); the *-mbe runs above "
+               f"use a 64-beam fan (tight-mbe's cost unit: particle-beam-step)")
 
 
 def _usage_error_types() -> tuple[type, ...]:

@@ -95,7 +95,7 @@ def test_replay_of_a_simulated_log_is_the_in_process_run_for_every_builtin_metho
             "pmf-mbe"} <= set(METHODS)
     out = mission / "replayed"
     proc = cli("replay", mission / "log", "--map", mission / "log" / "map.npz", "--settings", mission / "settings.yaml",
-               "--methods", ",".join(METHODS), "--seed", REPLAY_SEED, "--out", out, cwd=mission)
+               "--methods", ",".join(METHODS), "--seed", REPLAY_SEED, "--out", out, cwd=mission, timeout=1200)
     assert proc.returncode == 0, proc.stderr
     runs = pd.read_parquet(out / "runs.parquet").set_index("method")
     series = pd.read_parquet(out / "series.parquet")
