@@ -34,8 +34,6 @@ from __future__ import annotations
 
 import json
 import math
-from functools import lru_cache
-
 import numba as nb
 import numpy as np
 
@@ -116,17 +114,24 @@ def swath_ranges(truth_map, pos, pitch, roll, yaw, angles_rad, max_range) -> np.
     return out.reshape(n, m)
 
 
-@lru_cache(maxsize=4)
+_SWATHS: dict[str, tuple] = {}  # world JSON -> (its truth, rows, ranges): at most SWATHS_KEPT worlds
+SWATHS_KEPT = 4
+
+
 def noise_free_swath(world_json: str) -> tuple[np.ndarray, np.ndarray]:
     """(the DVL ping rows of the multibeam pings, their noise-free ranges (pings, N)) along the
-    world's truth with the nominal fan (read-only; cached per world)."""
+    world's truth with the nominal fan (read-only; kept per world while the simulation's cached
+    truth of that world is the same object)."""
+    from tanbench import simulation
     from tanbench.config import Scenario
-    from tanbench.simulation import noise_free_world
-    from tanbench.terrain import truth_map
 
+    truth, ping_idx, _, _ = simulation.noise_free_world(world_json)
+    kept = _SWATHS.get(world_json)
+    if kept is not None and kept[0] is truth:
+        return kept[1], kept[2]
     scenario = Scenario(**json.loads(world_json))
     s = scenario.sensors
-    truth, ping_idx, _, _ = noise_free_world(world_json)
+    truth_map = simulation.truth_map  # the world's truth map, as the simulation reads it
     rows = ping_rows(s, ping_idx.size)
     at = ping_idx[rows]
     angles, _ = sensor_fan(s)
@@ -135,13 +140,16 @@ def noise_free_swath(world_json: str) -> tuple[np.ndarray, np.ndarray]:
                           nominal, s.max_range_m)
     rows.setflags(write=False)
     ranges.setflags(write=False)
+    if len(_SWATHS) >= SWATHS_KEPT:
+        _SWATHS.pop(next(iter(_SWATHS)))
+    _SWATHS[world_json] = (truth, rows, ranges)
     return rows, ranges
 
 
 def measure_swath(scenario, truth, ping_idx, lost, angle_rng, range_rng, outlier_rng) -> np.ndarray:
     """Measured multibeam ranges (DVL pings, N): a row per DVL ping, NaN rows where the multibeam
     did not ping or the ping was lost (``lost`` (pings,) or None); see the module docstring."""
-    from tanbench.terrain import truth_map
+    from tanbench import simulation
 
     s, fl = scenario.sensors, scenario.faults
     world_json = json.dumps(scenario.world_spec(), sort_keys=True)
@@ -151,7 +159,7 @@ def measure_swath(scenario, truth, ping_idx, lost, angle_rng, range_rng, outlier
     if s.multibeam_angle_noise_deg > 0:
         at = ping_idx[rows]
         pointed = np.radians(angles) + math.radians(s.multibeam_angle_noise_deg) * unit_angle
-        ranges = swath_ranges(truth_map(scenario.terrain), truth.pos[at], truth.pitch[at], truth.roll[at],
+        ranges = swath_ranges(simulation.truth_map(scenario.terrain), truth.pos[at], truth.pitch[at], truth.roll[at],
                               truth.yaw[at], pointed, s.max_range_m)
     else:
         ranges = np.array(nominal_ranges)
