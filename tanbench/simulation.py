@@ -25,7 +25,7 @@ from tanbench.navigation.ins import run_strapdown
 from tanbench.sensors.dvl import measure_velocity
 from tanbench.sensors.faults import add_current, add_outliers, dropout_mask, tide_offset
 from tanbench.sensors.imu import ImuErrors, measure_imu
-from tanbench.sensors.multibeam import measure_swath, sensor_fan
+from tanbench.sensors.multibeam import measure_swath, sensor_fan, true_swath
 from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
 from tanbench.terrain import truth_map
@@ -148,8 +148,9 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
     mbe_beams = mbe_ranges = None
     if s.multibeam_beams:
         mbe_beams = sensor_fan(s)[1]
-        mbe_ranges = measure_swath(scenario, truth, ping_idx, lost if lost.any() else None, stream(STREAM_MBE_ANGLES),
-                                   stream(STREAM_MBE_RANGES), stream(STREAM_MBE_OUTLIERS))
+        mbe_ranges = measure_swath(s, fl, truth_map(scenario.terrain), truth, ping_idx, noise_free_swath(world_json),
+                                   lost if lost.any() else None, stream(STREAM_MBE_ANGLES), stream(STREAM_MBE_RANGES),
+                                   stream(STREAM_MBE_OUTLIERS))
 
     nav_cfg = scenario.navigation
     init = stream(STREAM_INITIAL)
@@ -214,6 +215,27 @@ def noise_free_world(world_json: str):
     for arr in (truth.pos, truth.pitch, truth.yaw, truth.vel_body, dvl, sbe, ping_idx):
         arr.setflags(write=False)
     return truth, ping_idx, dvl, sbe
+
+
+_SWATHS: dict[str, tuple] = {}  # world JSON -> (its truth, rows, ranges), for at most SWATHS_KEPT worlds
+SWATHS_KEPT = 4
+
+
+def noise_free_swath(world_json: str) -> tuple[np.ndarray, np.ndarray]:
+    """The multibeam's (DVL ping rows of its pings, noise-free ranges (pings, N)) in a world
+    (``sensors/multibeam.py``; read-only), kept while the world's cached truth is the same object."""
+    truth, ping_idx, _, _ = noise_free_world(world_json)
+    kept = _SWATHS.get(world_json)
+    if kept is not None and kept[0] is truth:
+        return kept[1], kept[2]
+    scenario = Scenario(**json.loads(world_json))
+    rows, ranges = true_swath(truth_map(scenario.terrain), truth, ping_idx, scenario.sensors)
+    rows.setflags(write=False)
+    ranges.setflags(write=False)
+    if len(_SWATHS) >= SWATHS_KEPT:
+        _SWATHS.pop(next(iter(_SWATHS)))
+    _SWATHS[world_json] = (truth, rows, ranges)
+    return rows, ranges
 
 
 def check_track_on_map(truth: Truth, tmap) -> None:

@@ -248,7 +248,8 @@ def true_tracks(scenario, sensor: str) -> tuple[list[TrueTrack], np.ndarray]:
     truth, ping_idx, dvl_true, sbe_true = noise_free_world(world_json)
     s = scenario.sensors
     if sensor == "mbe":
-        from tanbench.sensors.multibeam import noise_free_swath, sensor_fan
+        from tanbench.sensors.multibeam import sensor_fan
+        from tanbench.simulation import noise_free_swath
 
         rows, swath = noise_free_swath(world_json)
         ranges = np.full((ping_idx.size, swath.shape[1]), np.nan)

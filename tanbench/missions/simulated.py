@@ -62,7 +62,8 @@ def _with_multibeam(scenario, obs, meta, tables):
     """The multibeam's pings (one row per multibeam ping, at its DVL ping's time), its fan in
     ``beams.multibeam`` and its noise-free ranges beside the others in ``reference_ranges``."""
     from tanbench.missions.spec import BeamGeometry
-    from tanbench.sensors.multibeam import noise_free_swath, ping_rows, sensor_fan
+    from tanbench.sensors.multibeam import ping_rows, sensor_fan
+    from tanbench.simulation import noise_free_swath
 
     rows = ping_rows(scenario.sensors, obs.ping_idx.size)
     angles, _ = sensor_fan(scenario.sensors)

@@ -32,7 +32,6 @@ one row per DVL ping, NaN rows where the multibeam did not ping.
 
 from __future__ import annotations
 
-import json
 import math
 import numba as nb
 import numpy as np
@@ -114,53 +113,31 @@ def swath_ranges(truth_map, pos, pitch, roll, yaw, angles_rad, max_range) -> np.
     return out.reshape(n, m)
 
 
-_SWATHS: dict[str, tuple] = {}  # world JSON -> (its truth, rows, ranges): at most SWATHS_KEPT worlds
-SWATHS_KEPT = 4
-
-
-def noise_free_swath(world_json: str) -> tuple[np.ndarray, np.ndarray]:
-    """(the DVL ping rows of the multibeam pings, their noise-free ranges (pings, N)) along the
-    world's truth with the nominal fan (read-only; kept per world while the simulation's cached
-    truth of that world is the same object)."""
-    from tanbench import simulation
-    from tanbench.config import Scenario
-
-    truth, ping_idx, _, _ = simulation.noise_free_world(world_json)
-    kept = _SWATHS.get(world_json)
-    if kept is not None and kept[0] is truth:
-        return kept[1], kept[2]
-    scenario = Scenario(**json.loads(world_json))
-    s = scenario.sensors
-    truth_map = simulation.truth_map  # the world's truth map, as the simulation reads it
-    rows = ping_rows(s, ping_idx.size)
+def true_swath(truth_map, truth, ping_idx, sensors) -> tuple[np.ndarray, np.ndarray]:
+    """(the DVL ping rows of the multibeam pings, their noise-free ranges (pings, N)) along ``truth``
+    (at the IMU samples; ``ping_idx`` the DVL pings' samples) with the nominal fan of ``sensors``."""
+    rows = ping_rows(sensors, ping_idx.size)
     at = ping_idx[rows]
-    angles, _ = sensor_fan(s)
+    angles, _ = sensor_fan(sensors)
     nominal = np.broadcast_to(np.radians(angles), (rows.size, angles.size))
-    ranges = swath_ranges(truth_map(scenario.terrain), truth.pos[at], truth.pitch[at], truth.roll[at], truth.yaw[at],
-                          nominal, s.max_range_m)
-    rows.setflags(write=False)
-    ranges.setflags(write=False)
-    if len(_SWATHS) >= SWATHS_KEPT:
-        _SWATHS.pop(next(iter(_SWATHS)))
-    _SWATHS[world_json] = (truth, rows, ranges)
-    return rows, ranges
+    return rows, swath_ranges(truth_map, truth.pos[at], truth.pitch[at], truth.roll[at], truth.yaw[at], nominal,
+                              sensors.max_range_m)
 
 
-def measure_swath(scenario, truth, ping_idx, lost, angle_rng, range_rng, outlier_rng) -> np.ndarray:
+def measure_swath(sensors, faults, truth_map, truth, ping_idx, swath, lost, angle_rng, range_rng,
+                  outlier_rng) -> np.ndarray:
     """Measured multibeam ranges (DVL pings, N): a row per DVL ping, NaN rows where the multibeam
-    did not ping or the ping was lost (``lost`` (pings,) or None); see the module docstring."""
-    from tanbench import simulation
-
-    s, fl = scenario.sensors, scenario.faults
-    world_json = json.dumps(scenario.world_spec(), sort_keys=True)
-    rows, nominal_ranges = noise_free_swath(world_json)
+    did not ping or the ping was lost (``lost`` (pings,) or None); ``swath`` is :func:`true_swath`'s
+    (rows, noise-free ranges); see the module docstring."""
+    s, fl = sensors, faults
+    rows, nominal_ranges = swath
     angles, _ = sensor_fan(s)
     unit_angle = angle_rng.standard_normal((rows.size, angles.size))
     if s.multibeam_angle_noise_deg > 0:
         at = ping_idx[rows]
         pointed = np.radians(angles) + math.radians(s.multibeam_angle_noise_deg) * unit_angle
-        ranges = swath_ranges(simulation.truth_map(scenario.terrain), truth.pos[at], truth.pitch[at], truth.roll[at],
-                              truth.yaw[at], pointed, s.max_range_m)
+        ranges = swath_ranges(truth_map, truth.pos[at], truth.pitch[at], truth.roll[at], truth.yaw[at], pointed,
+                              s.max_range_m)
     else:
         ranges = np.array(nominal_ranges)
     if fl.sound_speed_scale_error:
