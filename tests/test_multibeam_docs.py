@@ -23,7 +23,7 @@ def section_blocks() -> tuple[str, list[str]]:
     """The sweep file and the command lines of docs/multibeam.md's section 4."""
     section = (ROOT / "docs" / "multibeam.md").read_text().split("## 4.", 1)[1].split("\n## ", 1)[0]
     sweep = re.search(r"```yaml\n(.*?)```", section, re.S).group(1)
-    commands = re.findall(r"```\n(.*?)```", section, re.S)[0]
+    commands = re.search(r"```\n(.*?)```", section.replace(f"```yaml\n{sweep}```", ""), re.S).group(1)
     return sweep, [line for line in commands.splitlines() if line.strip()]
 
 
