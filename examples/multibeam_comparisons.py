@@ -32,8 +32,8 @@ def world(row) -> str:
 
 def paired(a: pd.DataFrame, b: pd.DataFrame, label: str) -> str:
     """``label``: mean of a - b (final horizontal error) over runs where neither diverged, 95 % t interval."""
-    m = a.set_index("run")[["final_horizontal_error_m", "diverged"]].join(
-        b.set_index("run")[["final_horizontal_error_m", "diverged"]], lsuffix="_a", rsuffix="_b", how="inner")
+    cols = ["final_horizontal_error_m", "diverged"]
+    m = a.set_index("run")[cols].add_suffix("_a").join(b.set_index("run")[cols].add_suffix("_b"), how="inner")
     lost_a, lost_b = int(m["diverged_a"].sum()), int(m["diverged_b"].sum())
     ok = m[~m["diverged_a"].astype(bool) & ~m["diverged_b"].astype(bool)]
     d = (ok["final_horizontal_error_m_a"] - ok["final_horizontal_error_m_b"]).to_numpy()
@@ -67,8 +67,8 @@ def main(directory: str) -> None:
         print(paired(pmf, mbe, f"C2 {w}: pmf-mbe (64 beams) - tight-mbe (64 beams)"))
     thin = runs[runs["tables"].astype(str).str.contains("thinning")]
     if not thin.empty:
-        pick = thin["method_options"].astype(str).str.contains("information")
         for method in ("tight-mbe", "pmf-mbe"):
+            pick = thin[f"method_options.{method}.selection"].astype(str) == "information"
             info = thin[pick & (thin["method"] == method)]
             kth = thin[~pick & (thin["method"] == method)]
             print(paired(info, kth, f"C3 area A, {method}, 16 of 256 beams: information - every-kth"))
