@@ -193,8 +193,11 @@ def test_the_bound_falls_as_the_fan_gains_beams():
     """J adds over beams: the 61-beam fan holds the 16-beam fan's beams (8 deg = 4 x 2 deg), so its PCRB
     is no larger at any update."""
     from tanbench.bounds.pcrb import method_bound
+    from tanbench.methods import get
 
     base = dict(area="A", duration_s=60, particles=200)
-    few = method_bound(Scenario(**base, sensors={"multibeam_beams": 16}), "tight-mbe")["pcrb_horizontal_m"]
-    many = method_bound(Scenario(**base, sensors={"multibeam_beams": 61}), "tight-mbe")["pcrb_horizontal_m"]
+    bound = get("tight-mbe").bound
+    assert bound == ("mbe", "full")
+    few = method_bound(Scenario(**base, sensors={"multibeam_beams": 16}), bound)["pcrb_horizontal_m"]
+    many = method_bound(Scenario(**base, sensors={"multibeam_beams": 61}), bound)["pcrb_horizontal_m"]
     assert (many.to_numpy() <= few.to_numpy() * (1 + 1e-9)).all() and many.iloc[-1] < few.iloc[-1]

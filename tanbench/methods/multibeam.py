@@ -12,13 +12,16 @@ divides the likelihood's cost by about N / beams_used.
 
 from __future__ import annotations
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from tanbench.errors import TanbenchError
+from tanbench.filters.beams import nav_frame_offsets
+from tanbench.filters.swath import beam_information, every_kth, most_informative
 from tanbench.methods.api import MethodContext, MethodOutput
-from tanbench.methods.pmf import PmfOptions, grid_steps
+from tanbench.methods.pmf import PmfOptions, grid_steps, run_pmf
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.methods.tight import TIGHT_SERIES, TIGHT_STATES
+from tanbench.methods.tight import TIGHT_SERIES, TIGHT_STATES, run_tight
 from tanbench.options import MULTIBEAM_SELECTION, choices
 
 
@@ -37,11 +40,6 @@ class PmfSwathOptions(PmfOptions, SwathOptions):
 
 def swath(ctx: MethodContext):
     """(beams (m, 3), ranges at the updates (K, m)) of the multibeam, thinned as ``ctx.options`` say."""
-    import numpy as np
-
-    from tanbench.filters.beams import nav_frame_offsets
-    from tanbench.filters.swath import beam_information, every_kth, most_informative
-
     obs, o = ctx.obs, ctx.options
     if obs.mbe_beams is None or obs.mbe_ranges is None or obs.mbe_beams.shape[0] == 0:
         raise TanbenchError(f"method {ctx.name!r} needs a multibeam: set sensors.multibeam_beams > 0 (or give the "
@@ -59,15 +57,11 @@ def swath(ctx: MethodContext):
 
 def run_tight_mbe(ctx: MethodContext) -> MethodOutput:
     """The tightly coupled 8-state PF weighted by the multibeam swath."""
-    from tanbench.methods.tight import run_tight
-
     return run_tight(ctx, "mbe", swath(ctx))
 
 
 def run_pmf_mbe(ctx: MethodContext) -> MethodOutput:
     """The point-mass filter (position x heading bank) weighted by the multibeam swath."""
-    from tanbench.methods.pmf import run_pmf
-
     return run_pmf(ctx, "mbe", swath(ctx))
 
 
