@@ -11,8 +11,7 @@ import pytest
 
 from tanbench.config import Scenario
 from tanbench.filters.beams import nav_frame_offsets
-from tanbench.filters.likelihood import loglik_tight, loglik_tight_numpy
-from tanbench.filters.params import Likelihood
+from tanbench.filters.likelihood import Likelihood, loglik_tight, loglik_tight_numpy
 from tanbench.filters.swath import beam_information, beam_information_numpy, every_kth, most_informative
 from tanbench.sensors.multibeam import (fan_angles_deg, fan_directions, fan_directions_numpy, fan_vectors,
                                         swath_ranges)
