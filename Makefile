@@ -6,7 +6,7 @@ TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
 PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
 
-.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism check-numpy scaling clean
+.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism multibeam check-numpy scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -105,6 +105,15 @@ monterey: $(VENV)/.installed-run
 realism: $(VENV)/.installed-run
 	rm -rf results/realism
 	$(TB) run configs/realism.yaml --out results/realism --quiet
+
+## multibeam: accuracy and cost against the multibeam's beam count and swath angle (tight-mbe, pmf-mbe, tight-dvl) on
+## areas A, B and Monterey into results/multibeam (summary series): tables, the accuracy-cost figure and the
+## pre-registered comparisons (COMPARISONS.md; docs/multibeam.md section 5). RUNS=n overrides the sweep's 10.
+multibeam: $(VENV)/.installed-run
+	rm -rf results/multibeam
+	$(TB) run configs/multibeam.yaml --out results/multibeam --quiet --workers 2 --series summary $(if $(RUNS),--runs $(RUNS))
+	$(TB) plot results/multibeam --frontier
+	$(BIN)/python examples/multibeam_comparisons.py results/multibeam > results/multibeam/COMPARISONS.md
 
 ## bench: speed of every method, numpy vs fast random numbers, kernels (printed, never asserted)
 bench: $(VENV)/.installed-run

@@ -41,8 +41,10 @@ from tanbench.runner.plan import make_plan
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import execute
 from tanbench.navigation.increments import compute_increments
+from tanbench.sensors.multibeam import fan_angles_deg, fan_vectors, swath_ranges
 from tanbench.simulation import noise_free_world, simulate_vehicle
 from tanbench.sweep import parse_sweep
+from tanbench.terrain import truth_map
 from tanbench.terrain.grid import gather_cells, node_grid
 from tanbench.terrain.representation import map_variance_grid
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -63,13 +65,18 @@ def _best(fn, n):
     return min(cpu), min(wall)
 
 
-def bench_scenario(particles: int, random_numbers: str | None = None):
-    return Scenario(particles=particles, filter={} if random_numbers is None else {"random_numbers": random_numbers})
+# the multibeam methods' bench sonar: a 64-beam, 120-degree fan (the rest of the bench run is unchanged)
+MULTIBEAM_BENCH = {"multibeam_beams": 64, "multibeam_swath_deg": 120.0}
+
+
+def bench_scenario(particles: int, random_numbers: str | None = None, multibeam: bool = False):
+    return Scenario(particles=particles, filter={} if random_numbers is None else {"random_numbers": random_numbers},
+                    sensors=MULTIBEAM_BENCH if multibeam else {})
 
 
 def run_figures(method: str, particles: int, repeats: int, random_numbers: str | None = None) -> dict:
     """Whole-run figures of ``method``: ns per cost unit (CPU and wall), run wall, calibrated cost."""
-    scenario = bench_scenario(particles, random_numbers)
+    scenario = bench_scenario(particles, random_numbers, multibeam=method.endswith("-mbe"))
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(BENCH_SEED))
     units = float(get(method).cost_units(scenario))
     run_method(scenario, method, vehicle, np.random.SeedSequence(1))  # compile / load the cache
@@ -446,4 +453,32 @@ def run_bench(particles: int = 3000, repeats: int = 3, methods=None) -> dict:
         if method in PARTICLE_FILTERS:
             runs.append(run_figures(method, particles, repeats, "numpy"))
     return {"particles": particles, "updates": 1191, "runs": runs, "steps": reference_steps(particles),
-            "kernels": kernel_breakdown(particles), "fixed": fixed_costs()}
+            "kernels": kernel_breakdown(particles), "fixed": fixed_costs(),
+            "multibeam": multibeam_likelihood(particles)}
+
+
+def multibeam_likelihood(particles: int = 3000, beams: int = 64, reps: int = 10) -> dict:
+    """Cost per particle-beam of the multibeam likelihood: the tight PF's likelihood pass over a
+    ``beams``-beam, 120-degree fan cast from the true pose half-way through the bench run, on the
+    mid-run cloud (thread CPU ns per particle and beam), jitted and by its numpy twin."""
+    s = bench_state(particles)
+    sc, tr, k = s["scenario"], s["vehicle"].truth, s["upd"][s["k"] + 1]
+    angles = fan_angles_deg(beams, 120.0)
+    fan = fan_vectors(angles)
+    ranges = swath_ranges(truth_map(sc.terrain), tr.pos[k:k + 1], tr.pitch[k:k + 1], tr.roll[k:k + 1],
+                          tr.yaw[k:k + 1], np.radians(angles)[None, :], sc.sensors.max_range_m)[0]
+    vec = beam_vectors(fan, ranges)
+    used = vec.shape[0]
+    x, grid, lik, m = s["x0"].copy(), s["grid"], s["lik"], particles
+    work = L.work_block(L.new_likelihood_work(m, 4 * grid.grids), m)
+    su2, inv_d2, out2 = L.beam_constants(SIG_U, SIG_D, OUTSIDE)
+    ll, dist = np.empty(m), np.zeros((2, m))
+    nmap, f = s["ctx"].nmap, sc.filter
+    mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    za = nmap.kernel_args()
+    jit = _best(lambda: L.loglik_tight_pass(x, 0, vec, grid, lik, su2, out2, s["att"], dist, False, inv_d2, work,
+                                            ll), reps)[0]
+    ref = _best(lambda: L.loglik_tight_numpy(x, fan, ranges, za[0], mvar, *za[1:], SIG_U, OUTSIDE, None, SIG_D,
+                                             lik.mapaware, lik.kind, lik.nu), 2)[0]
+    return {"beams": used, "particles": m, "ns_per_particle_beam_jit": round(jit / (m * used) * 1e9, 2),
+            "ns_per_particle_beam_numpy": round(ref / (m * used) * 1e9, 2), "numpy_ratio": round(ref / jit, 1)}

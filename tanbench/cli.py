@@ -516,7 +516,10 @@ def terrain_stats(
                      + EXAMPLE.format("tanbench terrain suitability configs/zhou2017.yaml --track"))
 def terrain_suitability(
     target: Path = typer.Argument(..., help="A bathymetry file (the map as it is) or a sweep YAML."),
-    sensor: str = typer.Option("dvl", "--sensor", help="dvl (4 Janus beams) or sbe (one nadir beam)."),
+    sensor: str = typer.Option("dvl", "--sensor", help="dvl (4 Janus beams), sbe (one nadir beam) or mbe (a "
+                                                      "multibeam fan: --beams, --swath)."),
+    beams: int = typer.Option(64, "--beams", help="mbe: beams in the fan."),
+    swath: float = typer.Option(120.0, "--swath", help="mbe: the fan's full angle across track, deg."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Output directory [default: results/suitability]."),
     pings: int = typer.Option(10, "--pings", min=1, help="Pings of the predicted position std."),
     track: bool = typer.Option(False, "--track", help="Print the measures' means along the sweep's tracks."),
@@ -533,8 +536,20 @@ def terrain_suitability(
     from tanbench.suitability import (MEASURES, plot_suitability, sensor_beams, sources_from, suitability,
                                               track_summary, write_geotiff)
 
-    if sensor not in ("dvl", "sbe"):
-        raise TanbenchError(f"--sensor must be dvl or sbe, not {sensor!r}")
+    if sensor not in ("dvl", "sbe", "mbe"):
+        raise TanbenchError(f"--sensor must be dvl, sbe or mbe, not {sensor!r}")
+    fan = None
+    if sensor == "mbe":
+        from pydantic import ValidationError
+
+        from tanbench.config import SensorSpec, format_validation_error
+
+        try:
+            fan = SensorSpec(multibeam_beams=beams, multibeam_swath_deg=swath)
+        except ValidationError as exc:
+            raise TanbenchError("--beams/--swath: " + format_validation_error(exc)) from None
+        if beams < 1:
+            raise TanbenchError(f"--beams must be at least 1, not {beams}")
     sources = sources_from(target, altitude, noise)
     if track and not any(s.tracks for s in sources):
         raise TanbenchError(f"{target}: --track needs a sweep file (a map file has no tracks)")
@@ -547,7 +562,9 @@ def terrain_suitability(
         raise TanbenchError(f"cannot create {out}: {exc.strerror or exc}") from None
     rows = []
     for src in sources:
-        result = suitability(src.grid, sensor_beams(sensor), src.altitude_m, src.noise_m / 3 ** 0.5, pings,
+        # the multibeam's range std is its own (sensors.multibeam_range_noise_m) unless --noise is given
+        std = fan.multibeam_range_noise_m if fan is not None and noise is None else src.noise_m / 3 ** 0.5
+        result = suitability(src.grid, sensor_beams(sensor, sensors=fan), src.altitude_m, std, pings,
                              src.initial_area_m, window, sensor)
         stem = f"{src.label}-{sensor}"
         for name in MEASURES:
@@ -737,6 +754,11 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
     typer.echo(f"    per world: its noise-free simulation and sonar ray-casting {f['world_s']:.2f} s")
     typer.echo(f"    per task: the run's vehicle data {f['simulation_s']:.3f} s, around each method's filter "
                f"{f['around_filter_s']:.3f} s, storing its rows and series {f['store_s']:.3f} s")
+    mb = figures["multibeam"]
+    typer.echo(f"  multibeam likelihood (tight PF pass, {mb['beams']}-beam fan, map-aware Student-t, thread CPU): "
+               f"{mb['ns_per_particle_beam_jit']:.2f} ns per particle-beam jitted, "
+               f"{mb['ns_per_particle_beam_numpy']:.2f} numpy ({mb['numpy_ratio']:.1f} x); the *-mbe runs above "
+               f"use a 64-beam fan (tight-mbe's cost unit: particle-beam-step)")
 
 
 def _usage_error_types() -> tuple[type, ...]:

@@ -31,8 +31,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD, LIKELIHOOD_R,
-                              LOOSE_ARCHITECTURE, PROPAGATION, REGULARISATION, REGULARISED_STATES, RESAMPLING,
-                              choices)
+                              LOOSE_ARCHITECTURE, MULTIBEAM_PATTERN, PROPAGATION, REGULARISATION, REGULARISED_STATES,
+                              RESAMPLING, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
@@ -250,6 +250,27 @@ class SensorSpec(_Strict):
     max_range_m: float = Field(200.0, gt=0)
     pressure_error_percent: float = Field(0.01, ge=0, le=100)
     pressure_full_scale_m: float = Field(200.0, gt=0)
+    # the multibeam echo sounder (sensors/multibeam.py, docs/multibeam.md); off (0 beams) by default
+    multibeam_beams: int = new_option(0, ge=0, le=1024, description="beams in the multibeam swath (0: no multibeam)")
+    multibeam_swath_deg: float = new_option(120.0, gt=0, lt=170, description="multibeam: full fan angle across track")
+    multibeam_pattern: choices(MULTIBEAM_PATTERN) = new_option(
+        "equiangular", description="multibeam: beams equally spaced in angle, or in across-track distance on a "
+                                   "flat seafloor")
+    multibeam_range_noise_m: float = new_option(0.1, ge=0, le=10, description="multibeam: range noise std (Gaussian)")
+    multibeam_angle_noise_deg: float = new_option(
+        0.05, ge=0, le=5, description="multibeam: std of each beam's pointing error (the range is cast along the "
+                                      "perturbed beam)")
+    multibeam_rate_hz: float = new_option(
+        1.0, gt=0, le=20, description="multibeam pings per second: every k-th DVL ping (sonar_rate_hz / this whole)")
+
+    @model_validator(mode="after")
+    def _multibeam_on_the_sonar_clock(self):
+        if self.multibeam_beams:
+            k = self.sonar_rate_hz / self.multibeam_rate_hz
+            if abs(k - round(k)) > 1e-6 or round(k) < 1:
+                raise ValueError(f"multibeam_rate_hz ({self.multibeam_rate_hz:g}) must divide sonar_rate_hz "
+                                 f"({self.sonar_rate_hz:g}): a multibeam ping comes with every k-th DVL ping")
+        return self
 
     @model_validator(mode="after")
     def _a_ping_at_an_imu_sample(self):
@@ -538,11 +559,14 @@ class Scenario(_Strict):
     def pairing_key(self) -> str:
         """The world key without the world faults: what seeds a run's vehicle data, so a cell
         with a fault switched on shares its random numbers (sensor noise, initial errors)
-        with the fault-free cell, and the fault's effect is measured on paired runs. Equal
-        to :meth:`world_key` without faults."""
+        with the fault-free cell, and the fault's effect is measured on paired runs (so do
+        cells that differ only in the multibeam's settings). Equal to :meth:`world_key`
+        without faults and multibeam."""
         d = self.identity()
         d.pop("faults", None)
         d["terrain"] = {k: v for k, v in d["terrain"].items() if k != "map_error_correlation_m"}
+        # the multibeam draws from streams of its own: cells that differ only in its settings share the rest
+        d["sensors"] = {k: v for k, v in d["sensors"].items() if not k.startswith("multibeam_")}
         return stable_hash({k: d[k] for k in (*WORLD_SECTIONS, "model_version") if k in d})
 
     def cell_key(self) -> str:

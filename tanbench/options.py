@@ -26,3 +26,7 @@ PROPAGATION = {"exact": 0, "euler-last-second": 1, "euler-last-sample": 2}
 LIKELIHOOD_R = ("per-component", "scalar-norm", "scalar-determinant")
 INITIAL_CLOUD = ("uniform", "gaussian")
 COLLAPSE_REINIT = ("respread", "initial")
+# the multibeam's beam spacing across the fan (sensors/multibeam.py)
+MULTIBEAM_PATTERN = ("equiangular", "equidistant")
+# how the multibeam methods thin the swath (methods/multibeam.py): every k-th beam, or the most informative
+MULTIBEAM_SELECTION = ("every-kth", "information")

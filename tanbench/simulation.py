@@ -26,6 +26,7 @@ from tanbench.sensors.dvl import measure_velocity
 from tanbench.sensors.faults import (add_current, add_outliers, delay_pings, dropout_mask, far_start_offset,
                                      map_offset_positions, tide_offset)
 from tanbench.sensors.imu import ImuErrors, measure_imu
+from tanbench.sensors.multibeam import measure_swath, sensor_fan, true_swath
 from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
 from tanbench.terrain import truth_map
@@ -37,6 +38,8 @@ STREAM_INITIAL, STREAM_IMU, STREAM_DVL_VELOCITY, STREAM_DVL_RANGES, STREAM_SBE_R
 # world faults (sensors/faults.py): new streams, so faults off leave every number above unchanged
 STREAM_TIDE, STREAM_DROPOUT, STREAM_DVL_OUTLIERS, STREAM_SBE_OUTLIERS = range(6, 10)
 STREAM_FAR_START = 10
+# the multibeam (sensors/multibeam.py): its own streams, so switching it on changes no other number
+STREAM_MBE_ANGLES, STREAM_MBE_RANGES, STREAM_MBE_OUTLIERS = range(11, 14)
 MIN_ALTITUDE_M = 1.0
 
 
@@ -71,6 +74,8 @@ class Observations:
     dvl_ranges: np.ndarray  # (pings, 4) measured ranges, NaN = no bottom
     sbe_ranges: np.ndarray  # (pings, 1)
     nav: NavSolution
+    mbe_beams: np.ndarray | None = None  # (N, 3) the multibeam's nominal fan; None without a multibeam
+    mbe_ranges: np.ndarray | None = None  # (pings, N) at the DVL pings, NaN rows where it did not ping
 
 
 @dataclass
@@ -147,6 +152,12 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
     if fl.sonar_latency_pings:
         dvl_ranges = delay_pings(dvl_ranges, fl.sonar_latency_pings)
         sbe_ranges = delay_pings(sbe_ranges, fl.sonar_latency_pings)
+    mbe_beams = mbe_ranges = None
+    if s.multibeam_beams:
+        mbe_beams = sensor_fan(s)[1]
+        mbe_ranges = measure_swath(s, fl, truth_map(scenario.terrain), truth, ping_idx, noise_free_swath(world_json),
+                                   lost if lost.any() else None, stream(STREAM_MBE_ANGLES), stream(STREAM_MBE_RANGES),
+                                   stream(STREAM_MBE_OUTLIERS))
 
     nav_cfg = scenario.navigation
     init = stream(STREAM_INITIAL)
@@ -164,7 +175,8 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
         t=truth.t, dt=truth.dt, latitude_rad=truth.latitude_rad, gyro=gyro, accel=accel,
         dvl_velocity=dvl_velocity, depth=depth, ping_idx=ping_idx,
         dvl_beams=dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg), sbe_beams=altimeter_beam_vectors(),
-        dvl_ranges=dvl_ranges, sbe_ranges=sbe_ranges, nav=NavSolution(pos, pitch, roll, yaw))
+        dvl_ranges=dvl_ranges, sbe_ranges=sbe_ranges, nav=NavSolution(pos, pitch, roll, yaw),
+        mbe_beams=mbe_beams, mbe_ranges=mbe_ranges)
     return VehicleData(obs=obs, truth=truth, imu_errors=imu_errors, dvl_scale_error=scale,
                        initial_position_error=pos_err, initial_heading_error_deg=nav_cfg.initial_heading_error_deg)
 
@@ -212,6 +224,27 @@ def noise_free_world(world_json: str):
     for arr in (truth.pos, truth.pitch, truth.yaw, truth.vel_body, dvl, sbe, ping_idx):
         arr.setflags(write=False)
     return truth, ping_idx, dvl, sbe
+
+
+_SWATHS: dict[str, tuple] = {}  # world JSON -> (its truth, rows, ranges), for at most SWATHS_KEPT worlds
+SWATHS_KEPT = 4
+
+
+def noise_free_swath(world_json: str) -> tuple[np.ndarray, np.ndarray]:
+    """The multibeam's (DVL ping rows of its pings, noise-free ranges (pings, N)) in a world
+    (``sensors/multibeam.py``; read-only), kept while the world's cached truth is the same object."""
+    truth, ping_idx, _, _ = noise_free_world(world_json)
+    kept = _SWATHS.get(world_json)
+    if kept is not None and kept[0] is truth:
+        return kept[1], kept[2]
+    scenario = Scenario(**json.loads(world_json))
+    rows, ranges = true_swath(truth_map(scenario.terrain), truth, ping_idx, scenario.sensors)
+    rows.setflags(write=False)
+    ranges.setflags(write=False)
+    if len(_SWATHS) >= SWATHS_KEPT:
+        _SWATHS.pop(next(iter(_SWATHS)))
+    _SWATHS[world_json] = (truth, rows, ranges)
+    return rows, ranges
 
 
 def check_track_on_map(truth: Truth, tmap) -> None:

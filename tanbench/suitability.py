@@ -40,6 +40,7 @@ from tanbench.bounds.pcrb import ping_information, range_sensitivities
 from tanbench.config import FilterSpec, Scenario, SensorSpec, TerrainSpec
 from tanbench.errors import TanbenchError
 from tanbench.plot import pyplot
+from tanbench.sensors.multibeam import sensor_fan
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
 from tanbench.simulation import motion_plan
 from tanbench.sweep import load_sweep
@@ -225,9 +226,12 @@ def _terrain_label(sc) -> str:
     return f"{t.layout}-seed{t.seed}" if t.kind == "synthetic" else "file"
 
 
-def sensor_beams(sensor: str, scenario=None) -> np.ndarray:
-    """Body-frame beams of ``dvl`` (the scenario's Janus geometry) or ``sbe``."""
-    s = scenario.sensors if scenario is not None else SensorSpec()
+def sensor_beams(sensor: str, scenario=None, sensors=None) -> np.ndarray:
+    """Body-frame beams of ``dvl`` (the scenario's Janus geometry), ``sbe`` or ``mbe`` (the multibeam's fan
+    of ``sensors``, a ``SensorSpec``, or the scenario's)."""
+    s = sensors if sensors is not None else scenario.sensors if scenario is not None else SensorSpec()
+    if sensor == "mbe":
+        return sensor_fan(s)[1]
     return dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg) if sensor == "dvl" else altimeter_beam_vectors()
 
 

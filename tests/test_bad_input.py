@@ -493,6 +493,41 @@ READER_CASES = [
 ]
 CASES += READER_CASES
 
+MBE = {"multibeam_beams": 16}
+CASES += [
+    # the multibeam (issue 28): a row per new setting, checked before anything runs
+    case("multibeam-beams-negative", ["validate", "{sweep}"], sweep(scenario__sensors={"multibeam_beams": -1}),
+         "scenario.sensors.multibeam_beams: Input should be greater than or equal to 0 (got -1)"),
+    case("multibeam-beams-too-many", ["validate", "{sweep}"], sweep(scenario__sensors={"multibeam_beams": 5000}),
+         "scenario.sensors.multibeam_beams: Input should be less than or equal to 1024 (got 5000)"),
+    case("multibeam-swath-too-wide", ["validate", "{sweep}"],
+         sweep(scenario__sensors={**MBE, "multibeam_swath_deg": 180}),
+         "scenario.sensors.multibeam_swath_deg: Input should be less than 170 (got 180)"),
+    case("multibeam-pattern-unknown", ["validate", "{sweep}"],
+         sweep(scenario__sensors={**MBE, "multibeam_pattern": "fan"}),
+         "scenario.sensors.multibeam_pattern: Input should be 'equiangular' or 'equidistant' (got 'fan')"),
+    case("multibeam-range-noise-negative", ["validate", "{sweep}"],
+         sweep(scenario__sensors={**MBE, "multibeam_range_noise_m": -0.1}),
+         "scenario.sensors.multibeam_range_noise_m: Input should be greater than or equal to 0 (got -0.1)"),
+    case("multibeam-angle-noise-absurd", ["validate", "{sweep}"],
+         sweep(scenario__sensors={**MBE, "multibeam_angle_noise_deg": 10}),
+         "scenario.sensors.multibeam_angle_noise_deg: Input should be less than or equal to 5 (got 10)"),
+    case("multibeam-rate-off-the-sonar-clock", ["validate", "{sweep}"],
+         sweep(scenario__sensors={**MBE, "multibeam_rate_hz": 0.3}),
+         "scenario.sensors: multibeam_rate_hz (0.3) must divide sonar_rate_hz (1)"),
+    case("multibeam-method-without-a-multibeam", ["validate", "{sweep}"], sweep(methods=["tight-mbe"]),
+         "the multibeam methods (*-mbe) need a multibeam: set sensors.multibeam_beams > 0"),
+    case("multibeam-beams-used-negative", ["validate", "{sweep}"],
+         sweep(methods=["tight-mbe"], scenario__sensors=MBE, scenario__method_options={"tight-mbe": {"beams_used": -1}}),
+         "method_options.tight-mbe.beams_used: Input should be greater than or equal to 0 (got -1)"),
+    case("multibeam-selection-unknown", ["validate", "{sweep}"],
+         sweep(methods=["pmf-mbe"], scenario__sensors=MBE, scenario__method_options={"pmf-mbe": {"selection": "best"}}),
+         "method_options.pmf-mbe.selection: Input should be 'every-kth' or 'information' (got 'best')"),
+    case("suitability-multibeam-swath-too-wide", ["terrain", "suitability", "{maps}/map.npy", "--sensor", "mbe",
+                                                  "--swath", "200", "--out", "{tmp}/suit"], None,
+         "--beams/--swath: multibeam_swath_deg: Input should be less than 170 (got 200.0)"),
+]
+
 
 @pytest.mark.parametrize("setup, changes", [
     (depth_positive_geotiff, {"scenario__terrain__positive": "down"}),

@@ -1,5 +1,6 @@
 """Recorded missions (issue 28): `tanbench simulate --log` -> mission log -> `tanbench replay` is the
-in-process run, bit for bit, for every built-in method; the log's variants (CSV, an frd body
+in-process run, bit for bit, for every built-in method (the multibeam ones included: the run has a
+16-beam multibeam pinging at every second DVL ping); the log's variants (CSV, an frd body
 frame, degrees, a multibeam block of any width) read back to the same observations; without a
 reference track a replay writes the same estimates and no scores."""
 
@@ -29,7 +30,18 @@ from tanbench.terrain import navigation_map
 SEED, DURATION, PARTICLES, REPLAY_SEED = 3, 60, 200, 11
 METHODS = builtin_names()
 OBS_ARRAYS = ("t", "gyro", "accel", "dvl_velocity", "depth", "ping_idx", "dvl_beams", "sbe_beams", "dvl_ranges",
-              "sbe_ranges")
+              "sbe_ranges", "mbe_beams", "mbe_ranges")
+MULTIBEAM = {"multibeam_beams": 16, "multibeam_swath_deg": 120.0, "multibeam_rate_hz": 0.5}
+SWEEP = f"""name: roundtrip
+seed: 1
+runs: 1
+methods: [tight-dvl]
+scenario:
+  area: A
+  duration_s: {DURATION}
+  particles: {PARTICLES}
+  sensors: {MULTIBEAM}
+"""
 
 
 def same_bits(a, b) -> bool:
@@ -49,12 +61,12 @@ def assert_same_observations(obs, expected) -> None:
 
 @pytest.fixture(scope="module")
 def scenario():
-    return Scenario(area="A", duration_s=DURATION, particles=PARTICLES)
+    return Scenario(area="A", duration_s=DURATION, particles=PARTICLES, sensors=MULTIBEAM)
 
 
 @pytest.fixture(scope="module")
 def vehicle(scenario):
-    """The run `tanbench simulate --area A --seed SEED --duration DURATION` simulates."""
+    """The run `tanbench simulate --sweep SWEEP --seed SEED` simulates (area A with a multibeam)."""
     return simulate_vehicle(scenario, np.random.SeedSequence(SEED))
 
 
@@ -62,7 +74,8 @@ def vehicle(scenario):
 def mission(tmp_path_factory):
     """The CLI's mission log of that run, and replay settings with the test's particle count."""
     base = tmp_path_factory.mktemp("mission")
-    proc = cli("simulate", "--area", "A", "--seed", SEED, "--duration", DURATION, "--log", base / "log", cwd=base)
+    (base / "sweep.yaml").write_text(SWEEP)
+    proc = cli("simulate", "--sweep", base / "sweep.yaml", "--seed", SEED, "--log", base / "log", cwd=base)
     assert proc.returncode == 0, proc.stderr
     settings = yaml.safe_load((base / "log" / "settings.yaml").read_text())
     settings["particles"] = PARTICLES
@@ -78,10 +91,11 @@ def test_a_simulated_log_reads_back_to_the_observations_the_methods_were_given(m
 
 def test_replay_of_a_simulated_log_is_the_in_process_run_for_every_builtin_method(mission, scenario, vehicle):
     """Every metric and every per-update series of every built-in method, bit for bit."""
-    assert {"tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "mpf-dvl", "ekf-dvl", "tercom-dvl"} <= set(METHODS)
+    assert {"tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "mpf-dvl", "ekf-dvl", "tercom-dvl", "tight-mbe",
+            "pmf-mbe"} <= set(METHODS)
     out = mission / "replayed"
     proc = cli("replay", mission / "log", "--map", mission / "log" / "map.npz", "--settings", mission / "settings.yaml",
-               "--methods", ",".join(METHODS), "--seed", REPLAY_SEED, "--out", out, cwd=mission)
+               "--methods", ",".join(METHODS), "--seed", REPLAY_SEED, "--out", out, cwd=mission, timeout=1200)
     assert proc.returncode == 0, proc.stderr
     runs = pd.read_parquet(out / "runs.parquet").set_index("method")
     series = pd.read_parquet(out / "series.parquet")

@@ -45,8 +45,9 @@ def test_monterey_one_short_run_per_method(at_root):
     from tanbench.methods import run_method
     from tanbench.simulation import simulate_vehicle
 
-    sc = load_sweep(ROOT / "configs" / "monterey.yaml").cells[0].scenario.model_copy(
-        update={"duration_s": 120.0, "particles": 500})
+    sc = load_sweep(ROOT / "configs" / "monterey.yaml").cells[0].scenario
+    sensors = sc.sensors.model_copy(update={"multibeam_beams": 8})  # the multibeam methods take part too
+    sc = sc.model_copy(update={"duration_s": 120.0, "particles": 500, "sensors": sensors})
     vehicle = simulate_vehicle(sc, np.random.SeedSequence(3))
     assert np.isfinite(vehicle.obs.dvl_ranges).mean() > 0.9
     for method in builtin_names():

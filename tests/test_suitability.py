@@ -97,7 +97,7 @@ def _cli(*args, cwd=None):
 
 @pytest.mark.parametrize("args, message", [
     (["nonexistent.tif"], "no such map or sweep file"),
-    (["configs/quick.yaml", "--sensor", "usbl"], "--sensor must be dvl or sbe"),
+    (["configs/quick.yaml", "--sensor", "usbl"], "--sensor must be dvl, sbe or mbe"),
 ])
 def test_cli_bad_input(args, message, tmp_path):
     from pathlib import Path

@@ -54,7 +54,8 @@ import pandas as pd
 from tanbench.config import Scenario
 from tanbench.navigation.increments import D0E, D0N, JAXE, JAXN, JAZE, JAZN, SX, SZ, compute_increments
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
-from tanbench.simulation import noise_free_world
+from tanbench.sensors.multibeam import sensor_fan
+from tanbench.simulation import noise_free_swath, noise_free_world
 from tanbench.terrain import navigation_map
 from tanbench.terrain.grid import Map
 from tanbench.terrain.stats import gradient
@@ -111,8 +112,10 @@ class BoundModel:
         return j
 
 
-def model_for(scenario, states: str) -> BoundModel:
-    """The bound model for ``states`` ("full": the tight filter's, "position": the loose one's) in ``scenario``."""
+def model_for(scenario, states: str, sensor: str = "dvl") -> BoundModel:
+    """The bound model for ``states`` ("full": the tight filter's, "position": the loose one's) in ``scenario``;
+    the range noise is the sonar's: the multibeam's own std for ``sensor`` "mbe" (its pointing error is left
+    out, which can only lower the bound), else the uniform's of half-width ``noise_m``."""
     f = scenario.filter
     if states == "full":
         sig_pos = scenario.position_noise_m()
@@ -125,7 +128,8 @@ def model_for(scenario, states: str) -> BoundModel:
         initial_std_heading_rad=f.initial_std_heading_rad,
         initial_std_bias_rad_s=f.initial_std_gyro_bias_rad_s,
         position_noise_m=sig_pos, heading_noise_rad=scenario.attitude_noise_rad,
-        cross_track_heading_rad=cross, range_std_m=scenario.noise_m / math.sqrt(3.0))
+        cross_track_heading_rad=cross,
+        range_std_m=scenario.sensors.multibeam_range_noise_m if sensor == "mbe" else scenario.noise_m / math.sqrt(3.0))
 
 
 def range_sensitivities(grad_e, grad_n, beam_nav, ranges) -> np.ndarray:
@@ -224,13 +228,20 @@ def bound_frame(t: np.ndarray, P: np.ndarray) -> pd.DataFrame:
 def true_tracks(scenario, sensor: str) -> tuple[list[TrueTrack], np.ndarray]:
     """The runs' true trajectories of ``scenario`` at its filter updates, and the sensor's beams.
 
-    ``sensor`` is "dvl" or "sbe". The truth and its noise-free ranges depend on the world
+    ``sensor`` is "dvl", "sbe" or "mbe" (the multibeam's nominal fan; NaN rows where it does not
+    ping). The truth and its noise-free ranges depend on the world
     only (``noise_free_world``), so every run of a cell shares them: one track is the
     exact Monte Carlo average.
     """
-    truth, ping_idx, dvl_true, sbe_true = noise_free_world(json.dumps(scenario.world_spec(), sort_keys=True))
+    world_json = json.dumps(scenario.world_spec(), sort_keys=True)
+    truth, ping_idx, dvl_true, sbe_true = noise_free_world(world_json)
     s = scenario.sensors
-    if sensor == "dvl":
+    if sensor == "mbe":
+        rows, swath = noise_free_swath(world_json)
+        ranges = np.full((ping_idx.size, swath.shape[1]), np.nan)
+        ranges[rows] = swath
+        beams = sensor_fan(s)[1]
+    elif sensor == "dvl":
         ranges, beams = dvl_true, dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg)
     else:
         ranges, beams = sbe_true, altimeter_beam_vectors()
@@ -249,9 +260,11 @@ def update_track(scenario, truth, ping_idx: np.ndarray, ranges) -> TrueTrack:
                      yaw=truth.yaw[upd], ranges=np.asarray(ranges)[rows], increments=inc)
 
 
-def bound_series(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, scenario, states: str) -> pd.DataFrame:
-    """The PCRB series (t, ``BOUND_COLUMNS``) along ``tracks`` for the filter of ``scenario`` (``states``)."""
-    return bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model_for(scenario, states)))
+def bound_series(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, scenario, states: str,
+                 sensor: str = "dvl") -> pd.DataFrame:
+    """The PCRB series (t, ``BOUND_COLUMNS``) along ``tracks`` for the filter of ``scenario`` (``states``)
+    weighing by ``sensor``'s beams."""
+    return bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model_for(scenario, states, sensor)))
 
 
 def method_bound(scenario, bound: tuple[str, str] | None) -> pd.DataFrame | None:
@@ -266,4 +279,5 @@ def method_bound(scenario, bound: tuple[str, str] | None) -> pd.DataFrame | None
 def _bound_cached(scenario_json: str, sensor: str, states: str) -> pd.DataFrame:
     scenario = Scenario(**json.loads(scenario_json))
     tracks, beams = true_tracks(scenario, sensor)
-    return bound_series(tracks, beams, navigation_map(scenario.terrain, scenario.map_resolution_m), scenario, states)
+    return bound_series(tracks, beams, navigation_map(scenario.terrain, scenario.map_resolution_m), scenario, states,
+                        sensor)

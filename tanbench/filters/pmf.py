@@ -312,8 +312,9 @@ def pmf_loop(track, offsets, grid, settings, out):
                 continue
             flat = p[q].reshape(n * n)
             for t in range(n * n):
-                flat[t] *= math.exp(ll[q, t] - mx)
-                total += flat[t]
+                if flat[t] > 0.0:  # a node without mass stays at 0 (exp may overflow there: 0 x inf)
+                    flat[t] *= math.exp(ll[q, t] - mx)
+                    total += flat[t]
         p /= total
         live_out[k] = live
         # estimate: mixture moments over slices

@@ -33,10 +33,14 @@ class PmfOptions(BaseModel):
         0.25, ge=0, description="heading random walk between slices (stands for the gyro-bias drift)")
 
 
-def run_pmf(ctx: MethodContext, sensor: str) -> MethodOutput:
+def run_pmf(ctx: MethodContext, sensor: str, sonar=None) -> MethodOutput:
+    """The PMF weighted by ``sensor``'s beams ("dvl", "sbe"), or by ``sonar`` = (beams (m, 3), ranges at
+    the updates (K, m)) when given (the multibeam methods, methods/multibeam.py)."""
     obs, upd = ctx.obs, ctx.updates.imu
     beams = obs.dvl_beams if sensor == "dvl" else obs.sbe_beams
     ranges = (obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows]
+    if sonar is not None:
+        beams, ranges = sonar
     out = pmf_driver(nav_at_updates(ctx.nav, upd), beams, ranges, ctx.nmap.kernel_args(),
                      pmf_settings(ctx.scenario, ctx.options))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],

@@ -36,7 +36,7 @@ from tanbench.errors import TanbenchError
 
 # the built-in methods: adding one is one new module plus its line here
 BUILTIN_MODULES = ("tanbench.methods.tight", "tanbench.methods.loose", "tanbench.methods.pmf", "tanbench.methods.mpf",
-                   "tanbench.methods.ekf", "tanbench.methods.tercom")
+                   "tanbench.methods.ekf", "tanbench.methods.tercom", "tanbench.methods.multibeam")
 ENTRY_POINT_GROUP = "tanbench.methods"
 _IMPORT_NAME = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
 

@@ -59,10 +59,14 @@ def tight_start(ctx: MethodContext, settings: TightSettings):
     return x, rng
 
 
-def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
+def run_tight(ctx: MethodContext, sensor: str, sonar=None) -> MethodOutput:
+    """The tight PF weighted by ``sensor``'s beams ("dvl", "sbe"), or by ``sonar`` = (beams (m, 3),
+    ranges at the updates (K, m)) when given (the multibeam methods, methods/multibeam.py)."""
     sc, obs = ctx.scenario, ctx.obs
     beams = obs.dvl_beams if sensor == "dvl" else obs.sbe_beams
     ranges = (obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows]
+    if sonar is not None:
+        beams, ranges = sonar
     settings = tight_settings(sc, ctx.nmap)
     x, rng = tight_start(ctx, settings)
     out = new_tight_outputs(ctx.updates.imu.size)

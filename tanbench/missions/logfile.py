@@ -185,8 +185,9 @@ def _canonical(name: str, df: pd.DataFrame, path: Path, meta: LogMeta) -> pd.Dat
         if cols.take_block() == 0:
             raise TanbenchError(f"{path}: no beam ranges (columns range_1_m, range_2_m, ...)")
     elif name == "reference_ranges":
-        if cols.take_block("dvl_") + cols.take_block("altimeter_") == 0:
-            raise TanbenchError(f"{path}: no ranges (columns dvl_range_1_m, ..., altimeter_range_1_m)")
+        if cols.take_block("dvl_") + cols.take_block("altimeter_") + cols.take_block("multibeam_") == 0:
+            raise TanbenchError(f"{path}: no ranges (columns dvl_range_1_m, ..., altimeter_range_1_m, "
+                                f"multibeam_range_1_m)")
     return cols.frame()
 
 

@@ -41,7 +41,7 @@ class Reference:
     pitch: np.ndarray
     roll: np.ndarray
     yaw: np.ndarray  # rad, counter-clockwise from north (-heading)
-    true_ranges: dict  # sensor ("dvl", "altimeter") -> (pings, beams) noise-free ranges, when the log gives them
+    true_ranges: dict  # sensor ("dvl", "altimeter", "multibeam") -> (pings, beams) noise-free ranges, if given
 
     @property
     def has_attitude(self) -> bool:
@@ -80,7 +80,9 @@ def observations(log: MissionLog, nmap) -> Observations:
         dvl_ranges=_columns(dvl, range_columns(log.beam_count("dvl"))),
         sbe_ranges=altimeter_at_pings(log, ping_t),
         nav=NavSolution(pos=horizontal_local(log, nav, nmap), pitch=nav["pitch_rad"], roll=nav["roll_rad"],
-                        yaw=-nav["heading_rad"]))
+                        yaw=-nav["heading_rad"]),
+        mbe_beams=log.meta.beam_vectors("multibeam") if "multibeam" in log.tables else None,
+        mbe_ranges=readings_at_pings(log, "multibeam", ping_t) if "multibeam" in log.tables else None)
 
 
 def reference_truth(log: MissionLog, obs: Observations, nmap) -> Reference | None:
@@ -181,10 +183,16 @@ def held(log: MissionLog, per_ping: np.ndarray, ping_idx: np.ndarray, n: int) ->
 def altimeter_at_pings(log: MissionLog, ping_t: np.ndarray) -> np.ndarray:
     """(pings, beams) altimeter ranges at the DVL pings: the reading nearest each ping within half a
     ping interval, NaN otherwise (and without an altimeter table)."""
-    alt = log.tables.get("altimeter")
-    if alt is None:
+    if log.tables.get("altimeter") is None:
         return np.full((ping_t.size, 1), np.nan)
-    ranges = _columns(alt, range_columns(log.beam_count("altimeter")))
+    return readings_at_pings(log, "altimeter", ping_t)
+
+
+def readings_at_pings(log: MissionLog, table: str, ping_t: np.ndarray) -> np.ndarray:
+    """(pings, beams) ranges of a sonar ``table`` (altimeter, multibeam) at the DVL pings: the reading
+    nearest each ping within half a ping interval, NaN otherwise."""
+    alt = log.tables[table]
+    ranges = _columns(alt, range_columns(log.beam_count(table)))
     at = alt[TIME].to_numpy()
     if at.shape == ping_t.shape and np.array_equal(at, ping_t):
         return ranges
@@ -216,7 +224,7 @@ def _true_ranges(log: MissionLog) -> dict:
     if not np.array_equal(df[TIME].to_numpy(), log.tables["dvl"][TIME].to_numpy()):
         raise TanbenchError(f"{log.path}: reference_ranges must have one row per dvl ping, at the dvl's times")
     out = {}
-    for sensor, table in (("dvl", "dvl"), ("altimeter", "altimeter")):
+    for sensor, table in (("dvl", "dvl"), ("altimeter", "altimeter"), ("multibeam", "multibeam")):
         names = [c for c in df.columns if c.startswith(f"{sensor}_range_")]
         if not names:
             continue

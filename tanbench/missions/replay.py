@@ -164,7 +164,7 @@ def input_notes(log: MissionLog) -> list[str]:
     if "altimeter" not in log.tables:
         notes.append("no altimeter table: the single-beam methods get no ranges")
     if "multibeam" in log.tables:
-        notes.append(f"multibeam: {log.beam_count('multibeam')} beams read and checked; no method uses them yet")
+        notes.append(f"multibeam: {log.beam_count('multibeam')} beams (the *-mbe methods weigh by them)")
     return notes
 
 
@@ -238,15 +238,18 @@ def _bound(scenario, name, run: LoggedRun, nmap, cache):
     if spec not in cache:
         sensor, states = spec
         ref, obs = run.truth, run.obs
-        beams = obs.dvl_beams if sensor == "dvl" else obs.sbe_beams
-        ranges = ref.true_ranges.get("dvl" if sensor == "dvl" else "altimeter")
-        if ranges is None and ref.has_attitude:
+        beams = {"dvl": obs.dvl_beams, "sbe": obs.sbe_beams, "mbe": obs.mbe_beams}[sensor]
+        ranges = ref.true_ranges.get({"dvl": "dvl", "sbe": "altimeter", "mbe": "multibeam"}[sensor])
+        if ranges is None and ref.has_attitude and beams is not None:
             s = scenario.sensors
             width = (s.dvl_beamwidth_deg if sensor == "dvl" else s.altimeter_beamwidth_deg) if s.beam_footprint else 0.0
             p = obs.ping_idx
-            ranges = true_ranges(nmap, ref.pos[p], ref.pitch[p], ref.roll[p], ref.yaw[p], beams, width, s.max_range_m)
+            ranges = true_ranges(nmap, ref.pos[p], ref.pitch[p], ref.roll[p], ref.yaw[p], beams,
+                                 0.0 if sensor == "mbe" else width, s.max_range_m)
+            if sensor == "mbe":  # no bound information where the multibeam did not ping
+                ranges[np.isnan(obs.mbe_ranges).all(axis=1)] = np.nan
         cache[spec] = None if ranges is None else bound_series(
-            [update_track(scenario, ref, obs.ping_idx, ranges)], beams, nmap, scenario, states)
+            [update_track(scenario, ref, obs.ping_idx, ranges)], beams, nmap, scenario, states, sensor)
     return cache[spec]
 
 

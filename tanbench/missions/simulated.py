@@ -18,10 +18,11 @@ import pandas as pd
 
 from tanbench.errors import TanbenchError
 from tanbench.missions.logfile import MissionLog, beam_block
-from tanbench.missions.spec import ACCEL, FORMAT_NAME, FORMAT_VERSION, GYRO, TIME, VELOCITY, LogMeta
+from tanbench.missions.spec import ACCEL, FORMAT_NAME, FORMAT_VERSION, GYRO, TIME, VELOCITY, BeamGeometry, LogMeta
 from tanbench import __version__
 from tanbench.config import SensorSpec
-from tanbench.simulation import noise_free_world
+from tanbench.sensors.multibeam import ping_rows, sensor_fan
+from tanbench.simulation import noise_free_swath, noise_free_world
 from tanbench.terrain import truth_map
 from tanbench.terrain.georef import local_to_lonlat
 
@@ -54,7 +55,26 @@ def simulated_log(scenario, vehicle, seed: int, lonlat: bool = False) -> Mission
         "reference_ranges": pd.DataFrame({TIME: truth.t[ping_idx], **beam_block(np.asarray(dvl_true), "dvl_"),
                                           **beam_block(np.asarray(sbe_true), "altimeter_")}),
     }
+    if obs.mbe_ranges is not None:
+        meta, tables = _with_multibeam(scenario, obs, meta, tables)
     return MissionLog(meta=meta, tables=tables)
+
+
+def _with_multibeam(scenario, obs, meta, tables):
+    """The multibeam's pings (one row per multibeam ping, at its DVL ping's time), its fan in
+    ``beams.multibeam`` and its noise-free ranges beside the others in ``reference_ranges``."""
+    rows = ping_rows(scenario.sensors, obs.ping_idx.size)
+    angles, _ = sensor_fan(scenario.sensors)
+    tables["multibeam"] = pd.DataFrame({TIME: obs.t[obs.ping_idx][rows], **beam_block(obs.mbe_ranges[rows])})
+    _, swath = noise_free_swath(json.dumps(scenario.world_spec(), sort_keys=True))
+    true_swath = np.full((obs.ping_idx.size, swath.shape[1]), np.nan)
+    true_swath[rows] = swath
+    ref = tables["reference_ranges"]
+    tables["reference_ranges"] = pd.concat([ref, pd.DataFrame(beam_block(true_swath, "multibeam_"), index=ref.index)],
+                                           axis=1)
+    meta = meta.model_copy(update={"beams": {**meta.beams,
+                                             "multibeam": BeamGeometry(across_track_deg=tuple(float(a) for a in angles))}})
+    return meta, tables
 
 
 def _track(t, pos, pitch, roll, yaw, frame) -> pd.DataFrame:

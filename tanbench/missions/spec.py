@@ -24,6 +24,7 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 from tanbench.config import SensorSpec, _Strict
 from tanbench.errors import TanbenchError
 from tanbench.config import format_validation_error
+from tanbench.sensors.multibeam import fan_vectors
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
 from tanbench.sweep import MAX_YAML_VALUES, UniqueKeyLoader, expanded_size
 
@@ -112,8 +113,7 @@ class BeamGeometry(_Strict):
         if self.tilt_deg is not None:
             return dvl_beam_vectors(self.tilt_deg, self.azimuths_deg)  # angles are frame-free
         if self.across_track_deg is not None:
-            a = np.radians(np.asarray(self.across_track_deg, dtype=float))
-            return np.stack([np.sin(a), np.zeros_like(a), -np.cos(a)], axis=1)
+            return fan_vectors(self.across_track_deg)
         return to_rfu(np.asarray(self.vectors, dtype=float), body_frame)
 
     @property

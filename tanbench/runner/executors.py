@@ -77,6 +77,10 @@ def warm_up(scenario_json: str | None = None, methods=None) -> None:
     builtin = builtin_names()
     names = builtin if methods is None else tuple(m for m in methods if m in builtin)
     spec = json.loads(scenario_json) if scenario_json else {}
+    sensors = spec.get("sensors") or {}
+    if not sensors.get("multibeam_beams"):  # the multibeam methods warm up on a small fan (no other number changes)
+        spec = {**spec, "sensors": {**sensors, "multibeam_beams": 4,
+                                    "multibeam_rate_hz": sensors.get("sonar_rate_hz", 1.0)}}
     scenario = Scenario(**{**spec, "duration_s": 3.0, "particles": 16})
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(0))
     for method in names:

@@ -125,7 +125,8 @@ def check_world(cell: Cell, world, sensors_used: set[str]) -> None:
 
 def validate_worlds(sweep: Sweep) -> None:
     """Check every cell against its terrain: memory, maps, track, sonar and initial uncertainty."""
-    used = {name.rsplit("-", 1)[-1] for name in sweep.spec.methods if get(name).builtin} & set(SENSORS)
+    suffixes = {name.rsplit("-", 1)[-1] for name in sweep.spec.methods if get(name).builtin}
+    used = suffixes & set(SENSORS)
     seen = set()
     for cell in sweep.cells:
         sc = cell.scenario
@@ -134,6 +135,8 @@ def validate_worlds(sweep: Sweep) -> None:
             if sc.sampling_time_s > length + 1e-9:
                 raise ValueError(f"sampling_time_s ({sc.sampling_time_s:g} s) is longer than the run "
                                  f"({length:g} s): the filter would not update after the start")
+            if "mbe" in suffixes and not sc.sensors.multibeam_beams:
+                raise ValueError("the multibeam methods (*-mbe) need a multibeam: set sensors.multibeam_beams > 0")
             world = json.dumps(sc.world_spec(), sort_keys=True)
             if world not in seen:
                 check_memory(cell, length)
