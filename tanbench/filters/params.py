@@ -16,12 +16,17 @@ from tanbench.terrain.grid import MapArgs  # noqa: F401 - the map bundle, define
 # ``kind`` of size ``size``; a horizontal cloud below ``min_spread`` m std is re-spread
 Resampling = namedtuple("Resampling", "scheme ess_threshold kind cols size min_spread")
 
-# divergence: the best particle's RMS innovation above ``sigma`` for ``steps`` updates
-Divergence = namedtuple("Divergence", "sigma steps")
+# divergence: the best particle's RMS innovation above ``sigma`` for ``steps`` updates; the
+# tight filter's re-draw (``recovery``, options.RECOVERY: 0 around its own estimate, 1 around the
+# last healthy estimate moved on by dead reckoning, filters/recovery.py) over a square whose
+# half side grows by ``growth`` m per second since that estimate, up to ``max_half`` m
+Divergence = namedtuple("Divergence", "sigma steps recovery growth max_half", defaults=(0, 0.0, 0.0))
 
 # tight filter: process noise (east/north per update, up, attitude), distance innovation
-# mode and std, altitude std, innovation charged to a beam off the map
-TightModel = namedtuple("TightModel", "sig_pos sig_up sig_att dist_mode sig_d sig_u outside_sigma")
+# mode and std, altitude std, innovation charged to a beam off the map, and the gyro biases
+# random walk per update (rad/s; 0: none, Table 2; filters/bias_walk.py)
+TightModel = namedtuple("TightModel", "sig_pos sig_up sig_att dist_mode sig_d sig_u outside_sigma sig_bias",
+                        defaults=(0.0,))
 
 # tight filter initial cloud (and re-initialisation): uniform square of side 2 * half_side,
 # Gaussian up, attitude, heading and gyro biases

@@ -41,11 +41,15 @@ from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
                                         work_block)
+from tanbench.filters.bias_walk import walk_biases
+from tanbench.filters.posterior import REG_POSTERIOR, resample_posterior
 from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
+from tanbench.filters.recovery import recovery_square
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference
+from tanbench.navigation.increments import D0E, D0N
 
 REGULARISED_STATES = {
     "position-heading-biases": np.array([E, N, YAW, BX, BZ], dtype=np.int64),
@@ -64,7 +68,13 @@ def _shift_scale(row, centre, std):
 def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
     """Initial cloud (``x`` (8, M)): uniform square of side 2 * prior.half_side around
     (centre_e, centre_n), Gaussians else (``prior`` is a :class:`tanbench.filters.params.TightPrior`)."""
-    uniform_horizontal(x, rng, centre_e, centre_n, prior.half_side)
+    init_tight_square(x, rng, centre_e, centre_n, prior.half_side, up, pitch, roll, yaw, prior)
+
+
+@nb.njit(cache=True)
+def init_tight_square(x, rng, centre_e, centre_n, half_side, up, pitch, roll, yaw, prior):
+    """:func:`init_tight` over a square of half side ``half_side`` instead of ``prior.half_side``."""
+    uniform_horizontal(x, rng, centre_e, centre_n, half_side)
     fill_normals(rng, x[U:])
     _shift_scale(x[U], up, prior.std_up)
     _shift_scale(x[PITCH], pitch, prior.std_att)
@@ -109,7 +119,9 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
     idx = np.empty(m, dtype=np.int64)
     scratch = np.empty_like(x)
     block = min(BLOCK, m)
-    noise_buf = np.empty(6 * block)
+    walk = model.sig_bias > 0.0  # gyro biases random-walk: two more noise rows per particle
+    noise_rows = 8 if walk else 6
+    noise_buf = np.empty(noise_rows * block)
     dist_buf = np.zeros(2 * block)
     work = new_likelihood_work(block, 4 * grid.grids)
     mean = np.empty(N_TIGHT)
@@ -120,7 +132,15 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
     bad = 0
     locked = False  # the cloud has converged since the last (re)initialisation
     yaw_off = 0.0  # the cloud's heading offset from the navigation (centres the particles' trigonometry)
+    healthy_e = np.nan  # the last healthy estimate and the navigation's displacement since (filters/recovery.py)
+    healthy_n = np.nan
+    healthy_k = 0
+    dr_e = 0.0
+    dr_n = 0.0
     for k in range(steps):
+        if k > 0:
+            dr_e += inc[k - 1, D0E]
+            dr_n += inc[k - 1, D0N]
         vec = beam_vectors(beams, ranges[k])
         att = attitude_reference(nav_pitch[k], nav_roll[k], nav_yaw[k] + yaw_off)
         best = np.inf
@@ -128,8 +148,9 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
             n = min(block, m - lo)
             dist = dist_buf[:2 * n].reshape((2, n))
             if k > 0:
-                noise = noise_buf[:6 * n].reshape((6, n))
-                fill_normals(rng, noise)
+                noise_all = noise_buf[:noise_rows * n].reshape((noise_rows, n))
+                fill_normals(rng, noise_all)
+                noise = noise_all[:6]
                 if readings.propagation != 0:
                     propagate_tight_euler(x, euler_in[k - 1], readings.dt, inc[k - 1], noise, model.sig_pos,
                                           model.sig_up, model.sig_att, model.dist_mode, dist, nav_pitch[k - 1],
@@ -137,6 +158,8 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
                 else:
                     propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up,
                                     model.sig_att, model.dist_mode, dist, yaw_off, lo)
+                if walk:
+                    walk_biases(x, noise_all[6], noise_all[7], model.sig_bias, lo)
             best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist, with_dist and k > 0,
                                                inv_d2, work_block(work, n), ll[lo:lo + n]))
         mx = add_log_weights(logw, ll)
@@ -154,21 +177,36 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
         reinit_out[k] = 0
         healthy_out[k] = 1 if (spread < guard.healthy_std and best < 0.25 * div.sigma * div.sigma) else 0
         locked = locked or healthy_out[k] == 1
+        if healthy_out[k] == 1:
+            healthy_e = mean[E]
+            healthy_n = mean[N]
+            healthy_k = k
+            dr_e = 0.0
+            dr_n = 0.0
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
             bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
         diverged = readings.div_reinit and bad >= div.steps
         collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
         if diverged or collapsed or off_map:
-            init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior)
+            centre_e, centre_n, half = mean[E], mean[N], prior.half_side
+            if diverged and not off_map:
+                centre_e, centre_n, half = recovery_square(div.recovery, mean[E], mean[N], healthy_e, healthy_n, dr_e,
+                                                           dr_n, (k - healthy_k) * readings.dt, prior.half_side,
+                                                           div.growth, div.max_half)
+            init_tight_square(x, rng, centre_e, centre_n, half, nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k],
+                              prior)
             if readings.cloud_std > 0.0:
-                gaussian_horizontal(x, rng, mean[E], mean[N], readings.cloud_std)
+                gaussian_horizontal(x, rng, centre_e, centre_n, readings.cloud_std)
             logw[:] = 0.0
             bad = 0
             locked = False
             yaw_off = 0.0  # the new cloud is drawn about the navigation heading
             reinit_out[k] = 1
             continue
-        resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)
+        if rs.kind == REG_POSTERIOR:
+            resample_posterior(x, w, logw, ess, rng, rs, YAW, mean[YAW], spread, uni, idx, scratch)
+        else:
+            resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)
 
 
 @nb.njit(cache=True)

@@ -86,15 +86,42 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     out_en[0] = nav.pos[upd[0], :2]
     out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
-    loose_kalman_loop(x, rng, inc, nav.yaw[upd], nav.pos[upd, 2], offsets, likelihood_grid(f, ctx.nmap), model,
+    if f.loose_heading_offsets:
+        _run_turned(ctx, rng, x, inc, model, kf, p_kf, out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed,
+                    rejected, healthy)
+    else:
+        loose_kalman_loop(x, rng, inc, nav.yaw[upd], nav.pos[upd, 2], offsets, likelihood_grid(f, ctx.nmap), model,
                       resampling_of(f, LOOSE_COLS), divergence_bundle(f), f.initial_area_m / 2.0,
-                      likelihood_bundle(f), guard_bundle(f, ctx.nmap), kf, p_kf,
-                      out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
+                          likelihood_bundle(f), guard_bundle(f, ctx.nmap), kf, p_kf,
+                          out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], yaw=out_yaw, var_e=var[:, 0], var_n=var[:, 1],
                         var_heading=np.degrees(np.sqrt(var_yaw)) ** 2, ess=ess, reinit=reinit.astype(bool),
                         extra={"position_fix": fixed.astype(float), "fix_accepted": fixed.astype(float),
                                "fix_rejected": rejected.astype(float), "healthy": healthy.astype(float),
                                "var_yaw": var_yaw, "bias_z_deg_h": out_bias / DEG_PER_H})
+
+
+def _run_turned(ctx, rng, x, inc, model, kf, p_kf, out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected,
+                healthy):
+    """The closed loop with heading-offset particles and gated fixes (filters/loose_turned.py);
+    ``x`` (2, M) is the initial cloud, drawn as for the built-in loop."""
+    from tanbench.filters.loose_turned import LOOSE_TURNED_COLS, loose_turned_loop
+    from tanbench.filters.state import N_TIGHT
+    from tanbench.sensors.imu import DEG_PER_H
+
+    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
+    f = sc.filter
+    x8 = np.zeros((N_TIGHT, x.shape[1]))
+    x8[:2] = x
+    bias_limit = (f.loose_bias_gate_sigma * f.initial_std_gyro_bias_deg_h * DEG_PER_H
+                  if f.loose_bias_gate_sigma is not None else np.inf)
+    gates = (float(bias_limit), float(f.loose_fix_shape or 0.0), float(sc.sampling_time_s))
+    ranges = np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows])
+    loose_turned_loop(x8, rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
+                      np.ascontiguousarray(obs.dvl_beams), ranges, likelihood_grid(f, ctx.nmap), model,
+                      resampling_of(f, LOOSE_TURNED_COLS), divergence_bundle(f), f.initial_area_m / 2.0,
+                      likelihood_bundle(f), guard_bundle(f, ctx.nmap), kf, gates, p_kf, out_en, out_yaw, out_bias,
+                      var, var_yaw, ess, reinit, fixed, rejected, healthy)
 
 
 LOOSE_DVL = register(MethodRecord(

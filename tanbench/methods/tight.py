@@ -112,8 +112,23 @@ def guard_bundle(f, nmap):
 
 def divergence_bundle(f):
     from tanbench.filters.params import Divergence
+    from tanbench.options import RECOVERY
 
-    return Divergence(f.divergence_sigma, f.divergence_steps)
+    return Divergence(f.divergence_sigma, f.divergence_steps, RECOVERY[f.recovery], float(f.recovery_growth_mps),
+                      f.recovery_max_side_m / 2.0)
+
+
+def tight_resampling(f):
+    """The tight filters' Resampling bundle: the shared one, or the posterior-sized kernel
+    (``filter.tight_regularisation``, filters/posterior.py; on the rows of
+    ``filter.regularised_states``)."""
+    from tanbench.filters.posterior import REG_POSTERIOR
+    from tanbench.filters.tight import REGULARISED_STATES
+
+    rs = resampling_of(f, REGULARISED_STATES[f.regularised_states])
+    if f.tight_regularisation == "posterior":
+        rs = rs._replace(kind=REG_POSTERIOR, size=float(f.regularisation_bandwidth), min_spread=f.tight_min_spread_m)
+    return rs
 
 
 def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
@@ -122,7 +137,8 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     from tanbench.filters.propagate import position_noise
     from tanbench.filters.rng import loop_rng
     from tanbench.filters.state import N_TIGHT, PITCH, ROLL, U, YAW
-    from tanbench.filters.tight import REGULARISED_STATES, init_tight, tight_filter_loop
+    from tanbench.filters.bias_walk import tight_bias_walk_std
+    from tanbench.filters.tight import init_tight, tight_filter_loop
     from tanbench.navigation.increments import compute_increments
     from tanbench.options import DISTANCE_INNOVATION
     from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
@@ -137,7 +153,7 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     sig_d, sig_u = measurement_sigmas(f)
     model = TightModel(position_noise(f.process_noise_velocity_mps * T, sig_d, dist_mode),
                        f.process_noise_up_m, f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
-                       dist_mode, sig_d, sig_u, f.outside_map_sigma)
+                       dist_mode, sig_d, sig_u, f.outside_map_sigma, tight_bias_walk_std(sc))
     readings = readings_bundle(f, T)
     prior = TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
                        math.radians(f.initial_std_heading_deg), f.initial_std_gyro_bias_deg_h * DEG_PER_H)
@@ -153,7 +169,7 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     ess, reinit, healthy = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
     tight_filter_loop(x, rng, inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                       np.ascontiguousarray(ranges), np.ascontiguousarray(beams), likelihood_grid(f, ctx.nmap), model,
-                      resampling_of(f, REGULARISED_STATES[f.regularised_states]), divergence_bundle(f), prior,
+                      tight_resampling(f), divergence_bundle(f), prior,
                       readings, euler_inputs_of(ctx), likelihood_bundle(f), guard_bundle(f, ctx.nmap),
                       est, var, cov_en, ess, reinit, healthy)
     return MethodOutput(
