@@ -168,3 +168,62 @@ def test_literal_profile_keeps_the_paper_reading():
 
     s = profile_settings("zhou2017-literal")
     assert s["filter.gyro_bias_noise"] == "none" and s["filter.tight_regularisation"] == "shared"
+
+
+# ---- the loose TAN with heading-offset particles (docs/filters.md section 5 items 6-8) ----------------------
+LOOSE_NEUTRAL = {"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+                 "loose_fix_floor_m": 5.0}
+
+
+def test_propagate_loose_turned_matches_numpy():
+    from tanbench.filters.loose_turned import propagate_loose_turned, propagate_loose_turned_numpy
+
+    x, _ = _cloud(m=300)
+    noise = np.random.default_rng(4).normal(size=(3, 100))
+    y = x.copy()
+    propagate_loose_turned(y, 1.5, -0.7, 3.0, 0.01, noise, 0.1, 0.002, 200)
+    ref = x.copy()
+    ref[:, 200:] = propagate_loose_turned_numpy(x[:, 200:], 1.5, -0.7, 3.0, 0.01, noise, 0.1, 0.002)
+    np.testing.assert_allclose(y, ref, rtol=1e-14, atol=1e-9)
+
+
+def test_unimodal_fraction_matches_numpy():
+    from tanbench.filters.loose_turned import unimodal_fraction, unimodal_fraction_numpy
+
+    rng = np.random.default_rng(9)
+    one = rng.normal(size=(2, 4000))
+    two = one.copy()
+    two[0, :480] += 100.0  # 12 % of the weight in a far mode
+    w = np.full(4000, 1.0 / 4000)
+    for x in (one, two):
+        mean = x @ w
+        d = x - mean[:, None]
+        cov = (d * w) @ d.T
+        assert unimodal_fraction(x, w, mean, cov) == pytest.approx(unimodal_fraction_numpy(x, w, mean, cov))
+    assert unimodal_fraction(one, w, one @ w, np.cov(one)) == pytest.approx(0.95, abs=0.015)
+    assert unimodal_fraction(two, w, two @ w, np.cov(two)) < 0.9  # a split cloud gives no fix at 0.9
+    assert unimodal_fraction(one, w, one @ w, np.zeros((2, 2))) == 0.0
+
+
+def test_loose_neutral_options_reproduce_the_filter_before_them():
+    sys.path.insert(0, str(PROTOTYPES))
+    from tan_proto import loose
+    from tanbench.methods import get, method_context
+
+    scenario = Scenario(duration_s=150.0, particles=500, filter=LOOSE_NEUTRAL)
+    a, (vehicle, fseed) = _run("loose-dvl", scenario)
+    b = loose.run_loose(method_context(scenario, "loose-dvl", vehicle, fseed, get("loose-dvl")))
+    for k in ("east", "north", "yaw", "var_e", "var_n", "ess"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k), err_msg=k)
+
+
+def test_loose_heading_offsets_run():
+    a, _ = _run("loose-dvl", Scenario(duration_s=150.0, particles=500))
+    assert np.all(np.isfinite(a.east)) and np.all(a.var_e > 0)
+
+
+def test_gates_need_heading_offsets():
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="need filter.loose_heading_offsets"):
+        Scenario(filter={"loose_heading_offsets": False})
