@@ -24,6 +24,8 @@ METRIC_COLUMNS = (
     "recoveries", "first_reinit_s", "mean_recovery_s", "left_map", "fixes_accepted", "fixes_rejected",
     # consistency (metrics.consistency) and efficiency against the bound (bounds.pcrb): metrics.run_metrics
     "nees_mean_after_convergence", "nees_above_95", "nees_below_95", "pcrb_after_convergence_m", "rmse_pcrb_ratio",
+    # the whole-run consistency verdict (metrics.consistency.whole_run_verdict, docs/model.md 9.2)
+    "nees_mean_whole_run", "reported_std_below_bound",
 )
 
 # the per-update series stored for every run (float32): the scored ones every method has
