@@ -158,6 +158,13 @@ class TerrainSpec(_Strict):
     positive: Literal["up", "down"] = new_option(
         "up", description="what the file's values measure: up = elevation (seafloor negative), down = depth (negated)")
     fill_holes: bool = Field(False, description="fill no-data holes instead of rejecting the map")
+    resample_m: float | None = new_option(
+        None, gt=0, le=1000, description="file: resample the grid bilinearly onto square nodes of this spacing "
+                                         "(terrain/reshape.py)")
+    depth_range_m: tuple[float, float] | None = new_option(
+        None, description="file: rescale the elevations linearly to [low, high] metres (e.g. [-180, -60])")
+    transform: Literal["none", "transpose", "mirror-east"] = new_option(
+        "none", description="file: lay the relief out again: east and north swapped, or mirrored east-west")
     region_hurst: dict[str, float] | None = new_option(
         None, description="synthetic: spectral (Hurst) exponent per region name (A, B, flat, rough, background); "
                           "unset regions keep the layout's")
@@ -173,6 +180,12 @@ class TerrainSpec(_Strict):
                     raise ValueError(f"{label}.{name} must be in [{lo:g}, {hi:g}] (got {v:g})")
         if (self.region_hurst or self.region_corner_m) and self.kind != "synthetic":
             raise ValueError("region_hurst / region_corner_m apply to synthetic terrain only")
+        return self
+
+    @model_validator(mode="after")
+    def _depth_range_ordered(self):
+        if self.depth_range_m is not None and not self.depth_range_m[0] < self.depth_range_m[1]:
+            raise ValueError(f"depth_range_m must be [low, high] with low < high (got {list(self.depth_range_m)})")
         return self
 
     @model_validator(mode="after")
@@ -200,7 +213,8 @@ class TerrainSpec(_Strict):
         return self.model_copy(update={"layout": "vehicle-run" if area == "vehicle" else "paper"})
 
 
-FILE_ONLY = ("path", "format", "bounds", "origin", "resolution", "rows", "crs", "nodata", "positive", "fill_holes")
+FILE_ONLY = ("path", "format", "bounds", "origin", "resolution", "rows", "crs", "nodata", "positive", "fill_holes",
+             "resample_m", "depth_range_m", "transform")
 SYNTHETIC_ONLY = ("layout", "truth_resolution_m", "region_hurst", "region_corner_m")
 
 
