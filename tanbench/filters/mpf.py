@@ -189,7 +189,7 @@ def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps,
     ``div`` a ``Divergence`` bundle (``tanbench.filters.params``).
     """
     z, e0, n0, inv_re, inv_rn = zmap
-    div_sigma, div_steps = div
+    div_sigma, div_steps = div.sigma, div.steps
     m = x.shape[1]
     steps = offsets.shape[0]
     logw = np.zeros(m)
