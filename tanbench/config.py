@@ -34,6 +34,7 @@ from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NO
                               LIKELIHOOD_R, LOOSE_ARCHITECTURE, PROPAGATION, RECOVERY, REGULARISATION,
                               REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
+from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
 # Bump when a model's behaviour changes without a new option (the commit says why): every
 # cell key then changes, so no stored run is reused for results that would differ.
@@ -305,8 +306,22 @@ class NavigationSpec(_Strict):
     level_compensation: bool = Field(True, description="remove omega x v from the specific force")
 
 
+def position_noise(q: float, r: float, dist_mode: int) -> float:
+    """East/north noise per update: Table 2's q, or q combined with the distance noise r
+    (``filter.distance_innovation: particle``, :mod:`tanbench.filters.propagate`)."""
+    if dist_mode == DISTANCE_INNOVATION["particle"]:
+        return q * r / math.sqrt(q * q + r * r)
+    return q
+
+
 class FilterSpec(_Strict):
-    """Particle-filter settings (Table 2 as read in docs/model.md)."""
+    """Particle-filter settings (Table 2 as read in docs/model.md).
+
+    The defaults live here and only here: every kernel's parameter bundle is built from
+    this spec by one constructor next to the kernel (docs/architecture.md), and the derived
+    quantities (noise per update, the likelihood's sigmas) are the properties below and
+    on :class:`Scenario`.
+    """
 
     initial_area_m: float = Field(150.0, gt=0, description="side of the uniform initial square")
     initial_cloud: choices(INITIAL_CLOUD) = new_option(
@@ -373,6 +388,11 @@ class FilterSpec(_Strict):
     keep_on_map: bool = new_option(True, neutral=False, description="clamp the estimate into the map, reinitialise there [false]")
     divergence_spread_m: float | None = new_option(
         100.0, neutral=None, gt=0, description="horizontal cloud std counted as divergence [None: not checked]")
+    reinit_area_m: float | None = new_option(
+        None, gt=0, description="tight filter: side of the uniform square a reinitialised cloud (divergence, collapse, "
+                                "off the map) is redrawn over [None: initial_area_m]; a Gaussian initial_cloud keeps "
+                                "its std")
+
     # issue 24 (docs/filters.md sections 5-6): the tight filters near the bound and never lost
     gyro_bias_noise: choices(GYRO_BIAS_NOISE) = new_option(
         "data-sheet", neutral="none", description="tight PFs: the gyro biases random-walk at the data sheet's in-run "
@@ -410,6 +430,29 @@ class FilterSpec(_Strict):
             raise ValueError("filter.loose_bias_gate_sigma and filter.loose_fix_shape need "
                              "filter.loose_heading_offsets: true (set them to null without it)")
         return self
+
+    # ---- derived quantities -----------------------------------------------------
+    @property
+    def measurement_sigmas_m(self) -> tuple[float, float]:
+        """(distance, altitude) noise std of the particle filters' likelihood under ``likelihood_r``.
+
+        ``per-component``: Table 2's diag(0.1, 0.1, 1)^2 as given. ``scalar-norm``: Eq. 20's
+        single |R| as the norm of R (its largest variance), for every term.
+        ``scalar-determinant``: |R| as the determinant of R, taken as a variance in m^2.
+        """
+        d, u = self.measurement_noise_distance_m, self.measurement_noise_altitude_m
+        if self.likelihood_r == "per-component":
+            return d, u
+        variance = max(d * d, u * u) if self.likelihood_r == "scalar-norm" else (d * d) * (d * d) * (u * u)
+        return math.sqrt(variance), math.sqrt(variance)
+
+    @property
+    def initial_std_heading_rad(self) -> float:
+        return math.radians(self.initial_std_heading_deg)
+
+    @property
+    def initial_std_gyro_bias_rad_s(self) -> float:
+        return self.initial_std_gyro_bias_deg_h * DEG_PER_H
 
 
 class FaultSpec(_Strict):
@@ -493,6 +536,25 @@ class Scenario(_Strict):
                 f"({self.terrain.truth_resolution_m:g} m)")
         return self
 
+    # ---- derived quantities (computed here once for every method and the bound) --
+    def position_noise_m(self, distance_sigma_m: float | None = None) -> float:
+        """East/north process noise std per filter update (Table 2's q over the sampling time,
+        combined with the distance noise, by default ``filter.measurement_noise_distance_m``)."""
+        f = self.filter
+        r = f.measurement_noise_distance_m if distance_sigma_m is None else distance_sigma_m
+        return position_noise(f.process_noise_velocity_mps * self.sampling_time_s, r,
+                              DISTANCE_INNOVATION[f.distance_innovation])
+
+    @property
+    def attitude_noise_rad(self) -> float:
+        """Attitude process noise std per filter update (rad)."""
+        return self.filter.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(self.sampling_time_s)
+
+    @property
+    def planned_duration_s(self) -> float:
+        """The run's length for cost estimates: ``duration_s``, else the paper's 1190 s run."""
+        return self.duration_s or PAPER_RUN_S
+
     # ---- keys -------------------------------------------------------------------
     def normalized(self) -> dict:
         """The fully resolved spec as plain JSON-able data (every option, neutral ones included)."""
@@ -528,6 +590,7 @@ class Scenario(_Strict):
         return stable_hash(self.identity())
 
 
+PAPER_RUN_S = 1190.0  # the paper's run (Section 4.2), what a cost estimate assumes without duration_s
 WORLD_SECTIONS = ("terrain", "area", "trajectory", "sensors", "navigation", "duration_s", "faults")
 
 

@@ -12,6 +12,12 @@ import numpy as np
 import pandas as pd
 
 from tanbench.errors import TanbenchError
+from tanbench import store
+from tanbench.claims import evaluate, other_seafloor as other_seafloor_claim
+from tanbench.paper import compare_with_paper
+from tanbench.results import load, load_series, sweep_tables
+from tanbench.sweep import load_results_sweep
+from tanbench.anatomy import anatomy_markdown, anatomy_table
 
 TITLES = {
     "table3": "Table 3: area A, defaults (10 m map, noise +-1 m, 1 s, 3000 particles)",
@@ -164,12 +170,6 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
     """Write ``DIR/REPORT.md``; returns its path. ``literal``: results of the literal profile,
     shown beside (claims and tables); ``anatomy``: results of the anatomy sweep (its table);
     ``other_seafloor``: the literal profile on another seafloor (its fixed check)."""
-    from tanbench.claims import evaluate, other_seafloor as other_seafloor_claim
-    from tanbench.paper import compare_with_paper
-    from tanbench.results import load, load_series, sweep_tables
-    from tanbench import store
-    from tanbench.sweep import load_results_sweep
-
     directory = Path(directory)
     sweep = load_results_sweep(directory)
     missing = [name for name in TITLES if name not in sweep.table_designs]
@@ -230,8 +230,6 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
     else:
         parts += _claims_block("Results", claims)
     if anatomy is not None:
-        from tanbench.anatomy import anatomy_markdown, anatomy_table
-
         table = anatomy_table(load(anatomy), load_results_sweep(anatomy))
         parts += ["## The anatomy: one mechanism at a time", "",
                   "Starting from the literal profile, each row switches one mechanism to the recommended "

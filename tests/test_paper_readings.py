@@ -13,7 +13,7 @@ from tanbench.config import Scenario
 from tanbench.errors import TanbenchError
 from tanbench.filters import propagate as prop
 from tanbench.filters.cloud import gaussian_horizontal, gaussian_horizontal_numpy
-from tanbench.methods.tight import measurement_sigmas
+
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.navigation import increments as incmod
 from tanbench.navigation.increments import compute_euler_inputs, compute_increments, euler_inputs_numpy
@@ -144,7 +144,7 @@ def test_gaussian_horizontal_matches_numpy():
                                              ("scalar-determinant", (0.01, 0.01))])
 def test_measurement_sigmas(reading, expect):
     f = Scenario(filter={"likelihood_r": reading}).filter
-    assert measurement_sigmas(f) == pytest.approx(expect)
+    assert f.measurement_sigmas_m == pytest.approx(expect)
 
 
 def test_new_options_at_neutral_change_no_key():

@@ -18,6 +18,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ
+from tanbench.units import DEG_PER_H
 
 
 def gauss_markov_walk_std(sigma: float, corr_time_s: float, interval_s: float) -> float:
@@ -28,8 +29,6 @@ def gauss_markov_walk_std(sigma: float, corr_time_s: float, interval_s: float) -
 
 def tight_bias_walk_std(scenario) -> float:
     """rad/s per update of ``filter.gyro_bias_noise`` (0 for ``none``)."""
-    from tanbench.sensors.imu import DEG_PER_H
-
     if scenario.filter.gyro_bias_noise == "none":
         return 0.0
     s = scenario.sensors

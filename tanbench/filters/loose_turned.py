@@ -33,6 +33,7 @@ divergence, keep-on-map) is the built-in loop's.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
@@ -53,6 +54,12 @@ from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, es
 from tanbench.navigation.increments import JAZE, JAZN, SZ
 
 LOOSE_TURNED_COLS = np.array([E, N, YAW], dtype=np.int64)  # the rows the regularisation jitters
+# the navigation solution at the K updates: the (K-1, 12) increments, yaw, pitch, roll and up (K,); the body-frame
+# beam unit vectors (m, 3) and the ranges (K, m)
+TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
+# the fix gates: the z-gyro bias limit (rad/s; inf: off), the cloud's weight inside its 95 % ellipse (0: off), and the
+# sampling time (s)
+Gates = namedtuple("Gates", "bias_limit shape_min dt")
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
 
 
@@ -153,13 +160,14 @@ def _restart_prior(xp, wp, x, w):
 
 
 @nb.njit(cache=True)
-def loose_turned_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges, grid, model, rs, div,
-                      half_side, lik, guard, kf, gates, p_kf, out_en, out_yaw, out_bias, var, var_yaw, ess_out,
-                      reinit_out, fixed_out, rejected_out, healthy_out):
+def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     """:func:`~tanbench.filters.loose.loose_kalman_loop` with heading-offset particles (module
     docstring). ``x`` (8, M): rows E, N hold the initial cloud (the rest is filled here);
-    ``beams`` (m, 3) the body-frame beam unit vectors, ``ranges`` (K, m); ``gates`` =
-    (bias limit rad/s (inf: off), shape minimum (0: off), sampling time s). Outputs as there."""
+    ``track`` a :class:`TurnedTrack`, ``settings`` the loop's ``KalmanSettings`` and ``out`` its
+    ``KalmanOutputs`` (filters/loose.py), ``gates`` the :class:`Gates`."""
+    inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
+    model, rs, div, half_side, lik, guard, kf = settings
+    out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out, rejected_out, healthy_out = out
     bias_limit, shape_min, dt = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std

@@ -99,7 +99,7 @@ def anees_of_series(nees_mean) -> float:
     """ANEES read off the figure's curve: the time average of the Monte Carlo mean NEES (equal to
     the mean of the runs' whole-run averages when every run has a NEES at every update)."""
     v = np.asarray(nees_mean, float)
-    v = v[np.isfinite(v)]
+    v = v[~np.isnan(v)]  # an infinite mean (a float32 summary overflows above 3.4e38) stays: over-confident
     return float(v.mean()) if v.size else float("nan")
 
 
