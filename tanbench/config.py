@@ -30,9 +30,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD, LIKELIHOOD_R,
-                              LOOSE_ARCHITECTURE, MULTIBEAM_PATTERN, PROPAGATION, REGULARISATION, REGULARISED_STATES,
-                              RESAMPLING, choices)
+from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
+                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, MULTIBEAM_PATTERN, PROPAGATION, RECOVERY, REGULARISATION,
+                              REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
@@ -159,6 +159,13 @@ class TerrainSpec(_Strict):
     positive: Literal["up", "down"] = new_option(
         "up", description="what the file's values measure: up = elevation (seafloor negative), down = depth (negated)")
     fill_holes: bool = Field(False, description="fill no-data holes instead of rejecting the map")
+    resample_m: float | None = new_option(
+        None, gt=0, le=1000, description="file: resample the grid bilinearly onto square nodes of this spacing "
+                                         "(terrain/reshape.py)")
+    depth_range_m: tuple[float, float] | None = new_option(
+        None, description="file: rescale the elevations linearly to [low, high] metres (e.g. [-180, -60])")
+    transform: Literal["none", "transpose", "mirror-east"] = new_option(
+        "none", description="file: lay the relief out again: east and north swapped, or mirrored east-west")
     region_hurst: dict[str, float] | None = new_option(
         None, description="synthetic: spectral (Hurst) exponent per region name (A, B, flat, rough, background); "
                           "unset regions keep the layout's")
@@ -174,6 +181,12 @@ class TerrainSpec(_Strict):
                     raise ValueError(f"{label}.{name} must be in [{lo:g}, {hi:g}] (got {v:g})")
         if (self.region_hurst or self.region_corner_m) and self.kind != "synthetic":
             raise ValueError("region_hurst / region_corner_m apply to synthetic terrain only")
+        return self
+
+    @model_validator(mode="after")
+    def _depth_range_ordered(self):
+        if self.depth_range_m is not None and not self.depth_range_m[0] < self.depth_range_m[1]:
+            raise ValueError(f"depth_range_m must be [low, high] with low < high (got {list(self.depth_range_m)})")
         return self
 
     @model_validator(mode="after")
@@ -201,7 +214,8 @@ class TerrainSpec(_Strict):
         return self.model_copy(update={"layout": "vehicle-run" if area == "vehicle" else "paper"})
 
 
-FILE_ONLY = ("path", "format", "bounds", "origin", "resolution", "rows", "crs", "nodata", "positive", "fill_holes")
+FILE_ONLY = ("path", "format", "bounds", "origin", "resolution", "rows", "crs", "nodata", "positive", "fill_holes",
+             "resample_m", "depth_range_m", "transform")
 SYNTHETIC_ONLY = ("layout", "truth_resolution_m", "region_hurst", "region_corner_m")
 
 
@@ -380,7 +394,9 @@ class FilterSpec(_Strict):
         "kalman-feedback", neutral="fix-only", description="loose TAN: fixes to the navigation KF, closed loop [fix-only]")
     loose_fix_interval_s: float = new_option(10.0, gt=0, description="loose TAN: time between fixes to the KF")
     loose_fix_gate: float = new_option(13.8, gt=0, description="loose TAN: chi-square (2 dof) gate on fixes")
-    loose_fix_floor_m: float = new_option(5.0, ge=0, description="loose TAN: std added to a fix's own")
+    loose_fix_floor_m: float = new_option(1.0, neutral=5.0, ge=0, description="loose TAN: std added to a fix's own "
+                                                                            "[5: sized for the loose PF without "
+                                                                            "heading offsets]")
     loose_fix_max_std_m: float = new_option(
         25.0, gt=0, description="loose TAN: a window's terrain-only fix weaker than this is not used")
     loose_fix_misses: int = new_option(
@@ -397,6 +413,44 @@ class FilterSpec(_Strict):
         None, gt=0, description="tight filter: side of the uniform square a reinitialised cloud (divergence, collapse, "
                                 "off the map) is redrawn over [None: initial_area_m]; a Gaussian initial_cloud keeps "
                                 "its std")
+
+    # issue 24 (docs/filters.md sections 5-6): the tight filters near the bound and never lost
+    gyro_bias_noise: choices(GYRO_BIAS_NOISE) = new_option(
+        "data-sheet", neutral="none", description="tight PFs: the gyro biases random-walk at the data sheet's in-run "
+                                                  "rate (sensors.gyro_bias_instability_deg_h over "
+                                                  "gyro_bias_corr_time_s), and the bound follows [none: Table 2]")
+    tight_regularisation: choices(TIGHT_REGULARISATION) = new_option(
+        "posterior", neutral="shared", description="tight PFs: jitter with the posterior-sized kernel (weighted "
+                                                   "covariance, regularisation_bandwidth x h_opt) and re-spread "
+                                                   "below tight_min_spread_m [shared: regularisation, min_spread_m]")
+    regularisation_bandwidth: float = new_option(
+        0.5, gt=0, le=3, description="posterior kernel: factor on the optimal Gaussian kernel width h_opt")
+    tight_min_spread_m: float = new_option(
+        0.0, ge=0, description="posterior kernel: cloud std below which positions are re-spread (0: never)")
+    loose_heading_offsets: bool = new_option(
+        True, neutral=False, description="loose TAN (kalman-feedback): each particle carries a heading offset from the "
+                                         "corrected heading and sees its beams turned by it (filters/loose_turned.py)")
+    loose_bias_gate_sigma: float | None = new_option(
+        3.0, neutral=None, gt=0, description="loose TAN with heading offsets: reject a fix that puts the z-gyro bias "
+                                             "above this many initial_std_gyro_bias_deg_h [None: no gate]")
+    loose_fix_shape: float | None = new_option(
+        0.9, neutral=None, gt=0, lt=1, description="loose TAN with heading offsets: no fix from a cloud with less "
+                                                   "weight inside its own 95 % ellipse [None: no gate]")
+    recovery: choices(RECOVERY) = new_option(
+        "estimate", description="tight PFs: re-draw a diverged cloud around its own estimate, or around the last "
+                                "healthy estimate moved on by dead reckoning (filters/recovery.py)")
+    recovery_growth_mps: float = new_option(
+        0.5, ge=0, description="last-healthy recovery: growth of the re-draw square's half side per second")
+    recovery_max_side_m: float = new_option(
+        1000.0, gt=0, description="last-healthy recovery: largest side of the re-draw square")
+
+    @model_validator(mode="after")
+    def _gates_need_heading_offsets(self):
+        if not self.loose_heading_offsets and (self.loose_bias_gate_sigma is not None
+                                               or self.loose_fix_shape is not None):
+            raise ValueError("filter.loose_bias_gate_sigma and filter.loose_fix_shape need "
+                             "filter.loose_heading_offsets: true (set them to null without it)")
+        return self
 
     # ---- derived quantities -----------------------------------------------------
     @property

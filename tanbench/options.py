@@ -11,6 +11,12 @@ from typing import Literal
 
 RESAMPLING = {"systematic": 0, "multinomial": 1, "stratified": 2, "residual": 3}
 REGULARISATION = {"none": 0, "liu-west": 1, "gordon": 2}
+# the tight filters' regularisation: the shared ``regularisation`` / ``min_spread_m``, or the posterior-sized kernel
+# (filters/posterior.py; kernel code REG_POSTERIOR there, after REGULARISATION's)
+TIGHT_REGULARISATION = ("shared", "posterior")
+GYRO_BIAS_NOISE = ("none", "data-sheet")
+# where the tight filter re-draws a diverged cloud (filters/recovery.py)
+RECOVERY = {"estimate": 0, "last-healthy": 1}
 DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}
 LIKELIHOOD = {"student-t": 1, "gaussian": 0}  # beam density of the map-aware kernels (filters/likelihood.py)
 LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")

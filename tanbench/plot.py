@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from tanbench.errors import TanbenchError
+from tanbench.metrics.consistency import anees_of_series, mc_bounds, whole_run_verdict
 from tanbench.methods.registry import get
 from tanbench.results import load, load_series
 from tanbench.sweep import load_results_sweep
@@ -95,17 +96,18 @@ def plot_results(directory, cells: list[str] | None = None) -> list[Path]:
     directory = Path(directory)
     sweep = load_results_sweep(directory)
     series = load_series(directory)
+    below = below_bound_shares(directory)
     figdir = directory / "figures"
     chosen = select_cells(sweep, set(series["cell_id"]), cells)
     try:
         figdir.mkdir(parents=True, exist_ok=True)
-        return _draw(sweep, chosen, series, figdir, plt)
+        return _draw(sweep, chosen, series, figdir, plt, below)
     except OSError as exc:
         raise TanbenchError(f"cannot write the figures under {figdir} ({exc.strerror or exc}); "
                             f"plot a writable copy of {directory}") from None
 
 
-def _draw(sweep, cells, series, figdir: Path, plt) -> list[Path]:
+def _draw(sweep, cells, series, figdir: Path, plt, below=None) -> list[Path]:
     written = []
     defaults = {c.cell_id for c in representative_cells(sweep)}
     for cell in cells:
@@ -164,13 +166,34 @@ def _draw(sweep, cells, series, figdir: Path, plt) -> list[Path]:
         ax1.set_title(f"{title}\nheading, Monte Carlo mean", fontsize=10)
         written.append(_save(fig, figdir / f"{label}_heading.png", plt))
         if "pcrb_horizontal_m" in s.columns:
-            written.append(_bound_and_nees(s, methods, style, label, title, figdir, plt))
+            written.append(_bound_and_nees(s, methods, style, label, title, figdir, plt, below or {}))
     written += _track_maps(cells, series, figdir, plt, by_group=not {c.cell_id for c in cells} <= defaults)
     return written
 
 
-def _bound_and_nees(s, methods, style, label, title, figdir, plt) -> Path:
-    """RMS error beside each method's PCRB, and the Monte Carlo mean NEES with its chi-square bounds."""
+def below_bound_shares(directory) -> dict:
+    """(cell_id, method) -> the share of its ok runs whose reported std is below the bound (the
+    verdict's second input, metrics.consistency.whole_run_verdict); empty for older results."""
+    runs = load(directory, status="ok")
+    if "reported_std_below_bound" not in runs.columns:
+        return {}
+    g = runs.groupby(["cell_id", "method"])["reported_std_below_bound"].mean()
+    return {k: float(v) for k, v in g.items()}
+
+
+def figure_verdict(sm, below_share=float("nan")) -> tuple[float, str, tuple[float, float]]:
+    """(ANEES, verdict, band) of one method's summary series ``sm``, read off the figure's curve
+    (the time average of the Monte Carlo mean NEES) with the table's function."""
+    n = int(sm["n_runs"].max()) if len(sm) else 0
+    anees = anees_of_series(sm["nees_mean"])
+    band = tuple(float(b) for b in mc_bounds(n)) if n else (float("nan"), float("nan"))
+    return anees, whole_run_verdict(anees, n, below_share), band
+
+
+def _bound_and_nees(s, methods, style, label, title, figdir, plt, below) -> Path:
+    """RMS error beside each method's PCRB; the Monte Carlo mean NEES with its chi-square bounds,
+    each method's whole-run ANEES as a horizontal line, the band of the verdict shaded and the
+    verdict in the legend (the table's verdict, from the same function)."""
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
     for m in methods:
         sm = s[s["method"] == m]
@@ -179,13 +202,18 @@ def _bound_and_nees(s, methods, style, label, title, figdir, plt) -> Path:
             ax1.plot(sm["t"], sm["pcrb_horizontal_m"], "-", color=style[m][1], lw=0.8, alpha=0.7,
                      label=f"{m} PCRB")
         if sm["nees_mean"].notna().any():
-            ax2.plot(sm["t"], sm["nees_mean"], style[m][0], color=style[m][1], label=m)
+            cell = sm["cell_id"].iloc[0]
+            anees, verdict, band = figure_verdict(sm, below.get((cell, m), float("nan")))
+            ax2.plot(sm["t"], sm["nees_mean"], style[m][0], color=style[m][1], lw=0.8)
+            ax2.axhline(anees, color=style[m][1], lw=2.0, alpha=0.8,
+                        label=f"{m}: ANEES {anees:.3g}, {verdict}")
     first = s[s["method"] == methods[0]]
     ax2.fill_between(first["t"], first["nees_mc_low"], first["nees_mc_high"], color="gray", alpha=0.25,
-                     label="95 % bounds (consistent filter)")
+                     label="95 % band of the mean NEES and of ANEES (consistent filter)")
     ax1.set(yscale="log", ylabel="horizontal RMSE and PCRB (m)",
             title=f"{title}\nRMS error over runs beside the posterior Cramér-Rao bound")
-    ax2.set(yscale="log", ylabel="mean NEES", xlabel="time (s)", title="consistency: Monte Carlo mean NEES")
+    ax2.set(yscale="log", ylabel="mean NEES", xlabel="time (s)",
+            title="consistency: Monte Carlo mean NEES; lines: whole-run ANEES and verdict (docs/model.md 9.2)")
     ax1.legend(fontsize=7, ncol=2)
     ax2.legend(fontsize=7)
     return _save(fig, figdir / f"{label}_bound_nees.png", plt)

@@ -36,6 +36,13 @@ PROFILES: dict[str, dict[str, tuple[object, str]]] = {
         "filter.likelihood": ("gaussian", "Eq. 20: a Gaussian likelihood"),
         "filter.keep_on_map": (False, "the paper describes no bound on the estimate"),
         "filter.divergence_spread_m": (None, "the paper describes no divergence test"),
+        "filter.gyro_bias_noise": ("none", "Table 2: no process noise on the gyro biases"),
+        "filter.loose_heading_offsets": (False, "Section 2's loose TAN: a position-only particle filter"),
+        "filter.loose_bias_gate_sigma": (None, "the paper gates no fix"),
+        "filter.loose_fix_shape": (None, "the paper gates no fix"),
+        "filter.loose_fix_floor_m": (5.0, "tanbench's earlier fix floor (fix-only architecture: unused)"),
+        "filter.tight_regularisation": ("shared", "Algorithm 1 and Section 3.3 describe no jitter (regularisation "
+                                                  "none above)"),
     },
 }
 

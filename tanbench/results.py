@@ -19,7 +19,7 @@ import pandas as pd
 from tanbench import store
 from tanbench.errors import TanbenchError
 from tanbench.inference import clopper_pearson, p90
-from tanbench.metrics.consistency import cell_verdict, mc_bounds, nees
+from tanbench.metrics.consistency import cell_verdict, mc_bounds, nees, whole_run_verdict
 from tanbench.metrics.declarations import METRICS
 
 # the scenario columns every table shows (the paper's Tables 3-7 columns)
@@ -170,13 +170,25 @@ def _consistency_columns(ok: pd.DataFrame) -> dict:
     above = ok["nees_above_95"].to_numpy(dtype=float)
     below = ok["nees_below_95"].to_numpy(dtype=float)
     after = ok["nees_mean_after_convergence"].to_numpy(dtype=float)
-    return {
+    out = {
         # a collapsed cloud's NEES can reach 1e15: the median over runs stays readable
         "median_nees_after_convergence": float(np.nanmedian(after)) if np.isfinite(after).any() else np.nan,
         "nees_above_95": float(np.nanmean(above)) if np.isfinite(above).any() else np.nan,
         "nees_below_95": float(np.nanmean(below)) if np.isfinite(below).any() else np.nan,
-        "nees_verdict": cell_verdict(above, below),
+        "nees_fraction_verdict": cell_verdict(above, below),
     }
+    if "nees_mean_whole_run" not in ok.columns:  # stored before the whole-run verdict: the fraction rule's
+        out["nees_verdict"] = out["nees_fraction_verdict"]
+        return out
+    per_run = ok["nees_mean_whole_run"].to_numpy(dtype=float)
+    per_run = per_run[np.isfinite(per_run)]
+    below_bound = ok["reported_std_below_bound"].to_numpy(dtype=float)
+    share = float(np.nanmean(below_bound)) if np.isfinite(below_bound).any() else np.nan
+    anees = float(per_run.mean()) if per_run.size else np.nan
+    lo, hi = mc_bounds(per_run.size) if per_run.size else (np.nan, np.nan)
+    out.update(anees=anees, anees_band_low=float(lo), anees_band_high=float(hi), below_bound_share=share,
+               nees_verdict=whole_run_verdict(anees, per_run.size, share))
+    return out
 
 
 def _efficiency_columns(ok: pd.DataFrame) -> dict:

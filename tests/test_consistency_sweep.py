@@ -46,7 +46,8 @@ def test_overconfident_setting_is_flagged(results):
     table = pd.read_parquet(results / "tables" / "noise_model.parquet").set_index(
         "filter.measurement_noise_altitude_m")
     assert table.loc[1.0, "nees_verdict"] == "consistent"
-    assert table.loc[0.05, "nees_verdict"] == "over-confident"
+    # the whole-run verdict (docs/model.md 9.2): a reported std below the bound is over-confidence too
+    assert table.loc[0.05, "nees_verdict"].startswith("over-confident")
     assert table.loc[0.05, "nees_above_95"] > 0.5 > table.loc[1.0, "nees_above_95"]
     # the bound describes the data, not the filter's tuning: both cells share it
     runs = tr.load(results, status="ok")

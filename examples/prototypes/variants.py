@@ -102,3 +102,14 @@ for s in ("dvl", "sbe"):
 FINAL2 = {"pt-dvl/B-Ph-F0": 1400, "pt-sbe/B-Ph-F0": 2500}
 for label, n in FINAL2.items():
     VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
+
+# the implemented filters (docs/filters.md section 6): the built-in methods at the recommended defaults after
+# issue 24, under their own labels (the built-in labels above are the defaults of whatever code runs them)
+for name in ("tight-dvl", "tight-sbe", "loose-dvl"):
+    VARIANTS[f"impl/{name}"] = {"method": name}
+# label -> particles at which the filter wall time equals the point-mass filter's: timing.py A 3 on runs 0-2, back
+# to back (pmf-dvl 1.41 s, pmf-sbe 1.61 s; tight-dvl 3.58 s at 3000, 1.72 at 1500; tight-sbe 2.28 at 3000, 1.88 at
+# 2000; loose-dvl 3.84 at 3000, 1.66 at 1500), interpolated linearly and rounded down to 100 (section 6.1)
+IMPL_EQUAL_TIME = {"impl/tight-dvl": 1200, "impl/tight-sbe": 1300, "impl/loose-dvl": 1300}
+for label, n in IMPL_EQUAL_TIME.items():
+    VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}

@@ -52,6 +52,7 @@ import numpy as np
 import pandas as pd
 
 from tanbench.config import Scenario
+from tanbench.filters.bias_walk import tight_bias_walk_std
 from tanbench.navigation.increments import D0E, D0N, JAXE, JAXN, JAZE, JAZN, SX, SZ, compute_increments
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
 from tanbench.sensors.multibeam import sensor_fan
@@ -93,11 +94,12 @@ class BoundModel:
     heading_noise_rad: float  # per update
     cross_track_heading_rad: float  # loose filter: the heading uncertainty's cross-track term
     range_std_m: float  # std of the range noise (Gaussian of the uniform's variance)
+    bias_noise_rad_s: float = 0.0  # per update, each gyro bias (filter.gyro_bias_noise; 0: Table 2's none)
 
     @property
     def state_names(self) -> tuple[str, ...]:
         names = STATE_SETS[self.states]
-        if self.states == "full" and self.initial_std_bias_rad_s == 0.0:
+        if self.states == "full" and self.initial_std_bias_rad_s == 0.0 and self.bias_noise_rad_s == 0.0:
             names = names[:3]  # biases known exactly (zero prior, no process noise): not states
         return names
 
@@ -108,7 +110,7 @@ class BoundModel:
         if d > 2:
             j[2, 2] = 1.0 / max(self.initial_std_heading_rad, 1e-6) ** 2
         if d > 3:
-            j[3, 3] = j[4, 4] = 1.0 / self.initial_std_bias_rad_s**2
+            j[3, 3] = j[4, 4] = 1.0 / max(self.initial_std_bias_rad_s, 1e-12) ** 2
         return j
 
 
@@ -129,7 +131,8 @@ def model_for(scenario, states: str, sensor: str = "dvl") -> BoundModel:
         initial_std_bias_rad_s=f.initial_std_gyro_bias_rad_s,
         position_noise_m=sig_pos, heading_noise_rad=scenario.attitude_noise_rad,
         cross_track_heading_rad=cross,
-        range_std_m=scenario.sensors.multibeam_range_noise_m if sensor == "mbe" else scenario.noise_m / math.sqrt(3.0))
+        range_std_m=scenario.sensors.multibeam_range_noise_m if sensor == "mbe" else scenario.noise_m / math.sqrt(3.0),
+        bias_noise_rad_s=tight_bias_walk_std(scenario) if states == "full" else 0.0)
 
 
 def range_sensitivities(grad_e, grad_n, beam_nav, ranges) -> np.ndarray:
@@ -184,6 +187,7 @@ def transition(increments: np.ndarray, model: BoundModel) -> tuple[np.ndarray, n
     if d >= 5:
         F[:, 0, 3], F[:, 1, 3], F[:, 2, 3] = increments[:, JAXE], increments[:, JAXN], increments[:, SX]
         F[:, 0, 4], F[:, 1, 4], F[:, 2, 4] = -increments[:, JAZE], -increments[:, JAZN], -increments[:, SZ]
+        Q[:, 3, 3] = Q[:, 4, 4] = model.bias_noise_rad_s**2  # the filter's gyro-bias random walk, if any
     if model.cross_track_heading_rad > 0:
         perp = np.stack([-d0[:, 1], d0[:, 0]], axis=1)
         Q[:, :2, :2] += model.cross_track_heading_rad**2 * np.einsum("ki,kj->kij", perp, perp)

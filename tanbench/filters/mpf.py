@@ -199,7 +199,7 @@ def mpf_loop(x, rng, track, offsets, zmap, settings, out):
     half_side, std_yaw, var_b, var_eps = prior
     est, var, ess_out, reinit_out = out
     z, e0, n0, inv_re, inv_rn = zmap
-    div_sigma, div_steps = div
+    div_sigma, div_steps = div.sigma, div.steps
     m = x.shape[1]
     steps = offsets.shape[0]
     logw = np.zeros(m)

@@ -46,12 +46,16 @@ from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, likelihood_of, loglik_tight_pass,
                                         new_likelihood_work, work_block)
+from tanbench.filters.bias_walk import tight_bias_walk_std, walk_biases
+from tanbench.filters.posterior import REG_POSTERIOR, resample_posterior
 from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
+from tanbench.filters.recovery import recovery_square
 from tanbench.filters.resample import Resampling, add_log_weights, normalise_with_ess, resample_and_regularise, resampling_of
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference
-from tanbench.options import DISTANCE_INNOVATION, PROPAGATION
+from tanbench.navigation.increments import D0E, D0N
+from tanbench.options import DISTANCE_INNOVATION, PROPAGATION, RECOVERY
 from tanbench.units import DEG_PER_H
 
 REGULARISED_STATES = {
@@ -61,12 +65,17 @@ REGULARISED_STATES = {
 }
 
 # ---- the loop's bundles (named tuples numba passes by value), each with its constructor ----
-# divergence: the best particle's RMS innovation above ``sigma`` for ``steps`` updates
-Divergence = namedtuple("Divergence", "sigma steps")
+# divergence: the best particle's RMS innovation above ``sigma`` for ``steps`` updates; the
+# re-draw (``recovery``, options.RECOVERY: 0 around the filter's own estimate, 1 around the last
+# healthy estimate moved on by dead reckoning, filters/recovery.py) over a square whose half side
+# grows by ``growth`` m per second since that estimate, up to ``max_half`` m
+Divergence = namedtuple("Divergence", "sigma steps recovery growth max_half", defaults=(0, 0.0, 0.0))
 
 # process noise (east/north per update, up, attitude), distance innovation mode and std,
-# altitude std, innovation charged to a beam off the map
-TightModel = namedtuple("TightModel", "sig_pos sig_up sig_att dist_mode sig_d sig_u outside_sigma")
+# altitude std, innovation charged to a beam off the map, and the gyro biases' random walk per
+# update (rad/s; 0: none, Table 2; filters/bias_walk.py)
+TightModel = namedtuple("TightModel", "sig_pos sig_up sig_att dist_mode sig_d sig_u outside_sigma sig_bias",
+                        defaults=(0.0,))
 
 # initial cloud: uniform square of side 2 * half_side, Gaussian up, attitude, heading and gyro
 # biases; a re-initialisation draws the square with half side ``reinit_half_side``
@@ -93,7 +102,8 @@ TightOutputs = namedtuple("TightOutputs", "est var cov_en ess reinit healthy")
 
 
 def divergence_of(f) -> Divergence:
-    return Divergence(f.divergence_sigma, f.divergence_steps)
+    return Divergence(f.divergence_sigma, f.divergence_steps, RECOVERY[f.recovery], float(f.recovery_growth_mps),
+                      f.recovery_max_side_m / 2.0)
 
 
 def readings_of(f, sampling_time_s: float) -> Readings:
@@ -120,7 +130,8 @@ def tight_model_of(scenario) -> TightModel:
     f = scenario.filter
     sig_d, sig_u = f.measurement_sigmas_m
     return TightModel(scenario.position_noise_m(sig_d), f.process_noise_up_m, scenario.attitude_noise_rad,
-                      DISTANCE_INNOVATION[f.distance_innovation], sig_d, sig_u, f.outside_map_sigma)
+                      DISTANCE_INNOVATION[f.distance_innovation], sig_d, sig_u, f.outside_map_sigma,
+                      tight_bias_walk_std(scenario))
 
 
 def tight_prior_of(f) -> TightPrior:
@@ -129,10 +140,19 @@ def tight_prior_of(f) -> TightPrior:
                       f.initial_std_heading_rad, f.initial_std_gyro_bias_deg_h * DEG_PER_H, reinit_area_m / 2.0)
 
 
+def tight_resampling_of(f) -> Resampling:
+    """The tight filters' Resampling bundle: the shared one, or the posterior-sized kernel
+    (``filter.tight_regularisation``, filters/posterior.py; on the rows of ``filter.regularised_states``)."""
+    rs = collapse_resampling_of(f, REGULARISED_STATES[f.regularised_states])
+    if f.tight_regularisation == "posterior":
+        rs = rs._replace(kind=REG_POSTERIOR, size=float(f.regularisation_bandwidth), min_spread=f.tight_min_spread_m)
+    return rs
+
+
 def tight_settings(scenario, nmap) -> TightSettings:
     """Every bundle of :func:`tight_filter_loop` from ``scenario`` and its navigation map ``nmap``."""
     f = scenario.filter
-    return TightSettings(tight_model_of(scenario), collapse_resampling_of(f, REGULARISED_STATES[f.regularised_states]),
+    return TightSettings(tight_model_of(scenario), tight_resampling_of(f),
                          divergence_of(f), tight_prior_of(f), readings_of(f, scenario.sampling_time_s),
                          likelihood_of(f), guard_of(f, nmap))
 
@@ -203,7 +223,9 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     idx = np.empty(m, dtype=np.int64)
     scratch = np.empty_like(x)
     block = min(BLOCK, m)
-    noise_buf = np.empty(6 * block)
+    walk = model.sig_bias > 0.0  # gyro biases random-walk: two more noise rows per particle
+    noise_rows = 8 if walk else 6
+    noise_buf = np.empty(noise_rows * block)
     dist_buf = np.zeros(2 * block)
     work = new_likelihood_work(block, 4 * grid.grids)
     mean = np.empty(N_TIGHT)
@@ -214,7 +236,15 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     bad = 0
     locked = False  # the cloud has converged since the last (re)initialisation
     yaw_off = 0.0  # the cloud's heading offset from the navigation (centres the particles' trigonometry)
+    healthy_e = np.nan  # the last healthy estimate and the navigation's displacement since (filters/recovery.py)
+    healthy_n = np.nan
+    healthy_k = 0
+    dr_e = 0.0
+    dr_n = 0.0
     for k in range(steps):
+        if k > 0:
+            dr_e += inc[k - 1, D0E]
+            dr_n += inc[k - 1, D0N]
         vec = beam_vectors(beams, ranges[k])
         att = attitude_reference(nav_pitch[k], nav_roll[k], nav_yaw[k] + yaw_off)
         best = np.inf
@@ -222,8 +252,9 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
             n = min(block, m - lo)
             dist = dist_buf[:2 * n].reshape((2, n))
             if k > 0:
-                noise = noise_buf[:6 * n].reshape((6, n))
-                fill_normals(rng, noise)
+                noise_all = noise_buf[:noise_rows * n].reshape((noise_rows, n))
+                fill_normals(rng, noise_all)
+                noise = noise_all[:6]
                 if readings.propagation != 0:
                     propagate_tight_euler(x, euler_in[k - 1], readings.dt, inc[k - 1], noise, model.sig_pos,
                                           model.sig_up, model.sig_att, model.dist_mode, dist, nav_pitch[k - 1],
@@ -231,6 +262,8 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
                 else:
                     propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up,
                                     model.sig_att, model.dist_mode, dist, yaw_off, lo)
+                if walk:
+                    walk_biases(x, noise_all[6], noise_all[7], model.sig_bias, lo)
             best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist, with_dist and k > 0,
                                                inv_d2, work_block(work, n), ll[lo:lo + n]))
         mx = add_log_weights(logw, ll)
@@ -248,22 +281,35 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
         reinit_out[k] = 0
         healthy_out[k] = 1 if (spread < guard.healthy_std and best < 0.25 * div.sigma * div.sigma) else 0
         locked = locked or healthy_out[k] == 1
+        if healthy_out[k] == 1:
+            healthy_e = mean[E]
+            healthy_n = mean[N]
+            healthy_k = k
+            dr_e = 0.0
+            dr_n = 0.0
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
             bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
         diverged = readings.div_reinit and bad >= div.steps
         collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
         if diverged or collapsed or off_map:
-            draw_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior,
-                       prior.reinit_half_side)
+            centre_e, centre_n, half = mean[E], mean[N], prior.reinit_half_side
+            if diverged and not off_map:
+                centre_e, centre_n, half = recovery_square(div.recovery, mean[E], mean[N], healthy_e, healthy_n, dr_e,
+                                                           dr_n, (k - healthy_k) * readings.dt,
+                                                           prior.reinit_half_side, div.growth, div.max_half)
+            draw_tight(x, rng, centre_e, centre_n, nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior, half)
             if readings.cloud_std > 0.0:
-                gaussian_horizontal(x, rng, mean[E], mean[N], readings.cloud_std)
+                gaussian_horizontal(x, rng, centre_e, centre_n, readings.cloud_std)
             logw[:] = 0.0
             bad = 0
             locked = False
             yaw_off = 0.0  # the new cloud is drawn about the navigation heading
             reinit_out[k] = 1
             continue
-        resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)
+        if rs.kind == REG_POSTERIOR:
+            resample_posterior(x, w, logw, ess, rng, rs, YAW, mean[YAW], spread, uni, idx, scratch)
+        else:
+            resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)
 
 
 @nb.njit(cache=True)

@@ -23,7 +23,8 @@ from tanbench.filters.loose import (LOOSE_COLS, FixOnlyOutputs, FixOnlySettings,
                                     KalmanSettings, KalmanTrack, LooseKalman, LooseModel, loose_filter_loop,
                                     loose_kalman_loop)
 from tanbench.filters.rng import loop_rng
-from tanbench.filters.state import N_LOOSE
+from tanbench.filters.loose_turned import LOOSE_TURNED_COLS, Gates, TurnedTrack, loose_turned_loop
+from tanbench.filters.state import N_LOOSE, N_TIGHT
 from tanbench.filters.tight import collapse_resampling_of, divergence_of, guard_of, readings_of
 from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR
 from tanbench.navigation.increments import compute_increments
@@ -84,14 +85,33 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
     settings = KalmanSettings(model, collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), f.initial_area_m / 2.0,
                               likelihood_of(f), guard_of(f, ctx.nmap), kf)
-    loose_kalman_loop(x, rng, KalmanTrack(inc, nav.yaw[upd], nav.pos[upd, 2]), offsets, likelihood_grid(f, ctx.nmap),
-                      settings, p_kf, KalmanOutputs(out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed,
-                                                    rejected, healthy))
+    outputs = KalmanOutputs(out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
+    if f.loose_heading_offsets:
+        _run_turned(ctx, rng, x, inc, settings._replace(rs=collapse_resampling_of(f, LOOSE_TURNED_COLS)), p_kf,
+                    outputs)
+    else:
+        loose_kalman_loop(x, rng, KalmanTrack(inc, nav.yaw[upd], nav.pos[upd, 2]), offsets,
+                          likelihood_grid(f, ctx.nmap), settings, p_kf, outputs)
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], yaw=out_yaw, var_e=var[:, 0], var_n=var[:, 1],
                         var_heading=np.degrees(np.sqrt(var_yaw)) ** 2, ess=ess, reinit=reinit.astype(bool),
                         extra={"position_fix": fixed.astype(float), "fix_accepted": fixed.astype(float),
                                "fix_rejected": rejected.astype(float), "healthy": healthy.astype(float),
                                "var_yaw": var_yaw, "bias_z_deg_h": out_bias / DEG_PER_H})
+
+
+def _run_turned(ctx, rng, x, inc, settings, p_kf, out):
+    """The closed loop with heading-offset particles and gated fixes (filters/loose_turned.py);
+    ``x`` (2, M) is the initial cloud, drawn as for the built-in loop."""
+    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
+    f = sc.filter
+    x8 = np.zeros((N_TIGHT, x.shape[1]))
+    x8[:2] = x
+    bias_limit = (f.loose_bias_gate_sigma * f.initial_std_gyro_bias_rad_s if f.loose_bias_gate_sigma is not None
+                  else np.inf)
+    gates = Gates(float(bias_limit), float(f.loose_fix_shape or 0.0), float(sc.sampling_time_s))
+    track = TurnedTrack(inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
+                        np.ascontiguousarray(obs.dvl_beams), np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows]))
+    loose_turned_loop(x8, rng, track, likelihood_grid(f, ctx.nmap), settings, gates, p_kf, out)
 
 
 LOOSE_DVL = register(MethodRecord(

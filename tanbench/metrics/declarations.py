@@ -100,6 +100,11 @@ METRICS: tuple[Metric, ...] = (
            "RMS of the cell's PCRB after the run's convergence, m"),
     Metric("rmse_pcrb_ratio", pa.float64(), lambda r: r.consistency["rmse_pcrb_ratio"],
            "RMSE after convergence / PCRB"),
+    # the whole-run consistency verdict's inputs (metrics.consistency.whole_run_verdict, docs/model.md 9.2)
+    Metric("nees_mean_whole_run", pa.float64(), lambda r: r.consistency["nees_mean_whole_run"],
+           "mean NEES over every update of the run"),
+    Metric("reported_std_below_bound", pa.float64(), lambda r: r.consistency["reported_std_below_bound"],
+           "the method's reported horizontal std below the PCRB (metrics.consistency.reported_below_bound)"),
     # added as one declaration (issue 26): the share of the run spent lost
     Metric("lost_time_fraction", pa.float64(),
            lambda r: _f(np.mean(r.err_h > r.filter.divergence_threshold_m)),

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tanbench.metrics.consistency import nees, run_summary
+from tanbench.metrics.consistency import nees, reported_below_bound, run_summary
 
 
 def score_consistency_and_bound(scenario, method: str | None, t: np.ndarray, err_e, err_n, var_e, var_n, cov_en,
@@ -38,5 +38,6 @@ def score_consistency_and_bound(scenario, method: str | None, t: np.ndarray, err
         ratio = rmse_after_convergence_m / pcrb_rms
     else:
         pcrb_rms = ratio = float("nan")
-    metrics.update(pcrb_after_convergence_m=pcrb_rms, rmse_pcrb_ratio=float(ratio))
+    metrics.update(pcrb_after_convergence_m=pcrb_rms, rmse_pcrb_ratio=float(ratio),
+                   reported_std_below_bound=reported_below_bound(var_e, var_n, pcrb_h))
     return metrics, {"nees": values, "pcrb_horizontal_m": pcrb_h, "pcrb_heading_deg": pcrb_psi}

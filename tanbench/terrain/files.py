@@ -48,6 +48,7 @@ from tanbench.terrain.georef import (
 )
 from tanbench.terrain.grid import Map
 from tanbench.terrain.mosaic import MOSAIC_TOLERANCE, fill_holes, mosaic
+from tanbench.terrain.reshape import reshape_terrain
 
 
 def read_grid(
@@ -192,6 +193,7 @@ def load_file_terrain(spec) -> Map:
         grid = replace(grid, z=-grid.z)
     if spec.fill_holes:
         grid = fill_holes(grid)
+    grid = reshape_terrain(grid, spec.resample_m, spec.depth_range_m, spec.transform)
     name = f"file:{paths[0].name}" + (f"+{len(paths) - 1}" if len(paths) > 1 else "")
     return replace(grid, name=name, meta={**grid.meta, "kind": "file", "path": [str(p) for p in paths]})
 

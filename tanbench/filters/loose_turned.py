@@ -1,0 +1,325 @@
+"""The closed-loop loose TAN with heading-offset particles and gated fixes (issue 24,
+docs/filters.md section 5 items 6-8; ``filter.loose_heading_offsets``).
+
+The built-in loose PF (``filters/loose.py``, :func:`~tanbench.filters.loose.loose_kalman_loop`)
+moves every particle by the corrected navigation's displacement with a cross-track random
+walk sigma_psi |d| per update; a heading error makes the truth drift away coherently (1 m/s
+at 30 deg and 2 m/s), which the random walk cannot follow (docs/filters.md 3.3). Here each
+particle carries its own heading, psi_c + delta_j (psi_c the corrected navigation heading):
+
+* it moves by the corrected displacement turned by delta_j, plus ``sig_pos`` noise, and
+  delta_j random-walks with q_delta = sqrt(q_yaw^2 + P_bb T^2) (the KF's heading process noise
+  and its bias uncertainty over the interval; :func:`propagate_loose_turned`);
+* its beams are turned by delta_j: the cloud is stored in the tight filter's layout (8, M)
+  with the navigation's up, pitch and roll and the particle's absolute yaw, and weighed by the
+  tight likelihood kernel (``likelihood.loglik_tight_pass``), which is exact for Rz(psi_c +
+  delta) = Rz(delta) Rz(psi_c);
+* delta_j ~ N(0, P_psipsi) (the KF's heading variance) at every (re)initialisation; an
+  accepted fix turns the corrected heading by dx_psi and, the particle yaws being absolute,
+  every delta by -dx_psi;
+* the prior of the terrain-only fix is a second cloud moved by the same kernel with its own
+  noise and never weighted, restarted from the posterior (and its weights) at each fix
+  attempt and at every (re)initialisation; its weighted mean and covariance replace the
+  analytic window prior of the built-in loop.
+
+Two gates keep fixes from dragging the navigation KF into a wrong basin (item 8): a fix
+whose update would put the z-gyro bias estimate above ``bias_limit`` (rad/s) is rejected
+(the KF's covariance is restored), and no fix is taken from a cloud with less than
+``shape_min`` of its weight inside its own chi^2_2 95 % ellipse (:func:`unimodal_fraction`).
+Everything else (fix interval, chi-square gate, floor, reopening a locked-out KF,
+divergence, keep-on-map) is the built-in loop's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numba as nb
+import numpy as np
+
+from tanbench.filters import FASTMATH
+from tanbench.filters.cloud import uniform_horizontal
+from tanbench.filters.estimate import weighted_estimate
+from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
+                                        work_block)
+from tanbench.filters.loose import position_reset, reopen_kf
+from tanbench.filters.propagate import DIST_NONE, propagate_tight
+from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
+from tanbench.filters.rng import fill_normals
+from tanbench.filters.state import BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
+from tanbench.filters.tight import keep_on_map
+from tanbench.filters.trig import attitude_reference, sin_cos
+from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
+from tanbench.navigation.increments import JAZE, JAZN, SZ
+
+LOOSE_TURNED_COLS = np.array([E, N, YAW], dtype=np.int64)  # the rows the regularisation jitters
+# the navigation solution at the K updates: the (K-1, 12) increments, yaw, pitch, roll and up (K,); the body-frame
+# beam unit vectors (m, 3) and the ranges (K, m)
+TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
+# the fix gates: the z-gyro bias limit (rad/s; inf: off), the cloud's weight inside its 95 % ellipse (0: off), and the
+# sampling time (s)
+Gates = namedtuple("Gates", "bias_limit shape_min dt")
+CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def propagate_loose_turned(x, d_e, d_n, yaw_ref, dyaw, noise, sig_pos, q_delta, lo=0):
+    """Particles ``lo .. lo + n - 1`` of ``x`` (8, M; rows E, N, YAW used) move by (d_e, d_n)
+    turned by their heading offset from ``yaw_ref`` (the corrected heading at the interval
+    start) plus ``sig_pos`` noise; their yaw by ``dyaw`` (the corrected heading's increment)
+    plus ``q_delta`` noise. ``noise`` (3, n) standard normals."""
+    n = noise.shape[1]
+    e = x[E, lo:lo + n]
+    nn = x[N, lo:lo + n]
+    yaw = x[YAW, lo:lo + n]
+    n_e, n_n, n_y = noise[0], noise[1], noise[2]
+    for j in range(n):
+        s, c = sin_cos(yaw[j] - yaw_ref)
+        e[j] += c * d_e - s * d_n + sig_pos * n_e[j]
+        nn[j] += s * d_e + c * d_n + sig_pos * n_n[j]
+        yaw[j] += dyaw + q_delta * n_y[j]
+
+
+def propagate_loose_turned_numpy(x, d_e, d_n, yaw_ref, dyaw, noise, sig_pos, q_delta):
+    """Plain-numpy reference of :func:`propagate_loose_turned` on the whole cloud (new array)."""
+    x = np.array(x, dtype=float)
+    delta = x[YAW] - yaw_ref
+    c, s = np.cos(delta), np.sin(delta)
+    x[E] += c * d_e - s * d_n + sig_pos * noise[0]
+    x[N] += s * d_e + c * d_n + sig_pos * noise[1]
+    x[YAW] += dyaw + q_delta * noise[2]
+    return x
+
+
+@nb.njit(cache=True)
+def unimodal_fraction(x, w, mean, cov):
+    """The weight of the particles inside the cloud's own 95 % ellipse: (x - mean)^T cov^-1
+    (x - mean) <= chi^2_2(0.95), rows 0, 1 of ``x``; 0 for a singular ``cov``. About 0.95 for a
+    Gaussian cloud, less for a split one."""
+    det = cov[0, 0] * cov[1, 1] - cov[0, 1] * cov[1, 0]
+    if not det > 0.0:
+        return 0.0
+    i00 = cov[1, 1] / det
+    i11 = cov[0, 0] / det
+    i01 = -cov[0, 1] / det
+    total = 0.0
+    for j in range(x.shape[1]):
+        de = x[0, j] - mean[0]
+        dn = x[1, j] - mean[1]
+        if i00 * de * de + 2.0 * i01 * de * dn + i11 * dn * dn <= CHI2_2_95:
+            total += w[j]
+    return total
+
+
+def unimodal_fraction_numpy(x, w, mean, cov):
+    """Plain-numpy reference of :func:`unimodal_fraction`."""
+    cov = np.asarray(cov, dtype=float)
+    if not np.linalg.det(cov) > 0:
+        return 0.0
+    d = np.asarray(x)[:2] - np.asarray(mean)[:2, None]
+    q = np.einsum("ij,ik,kj->j", d, np.linalg.inv(cov), d)
+    return float(np.asarray(w)[q <= CHI2_2_95].sum())
+
+
+@nb.njit(cache=True)
+def _draw_headings(x, rng, yaw_c, std):
+    """Row YAW of ``x`` <- yaw_c + std N(0, 1)."""
+    row = x[YAW]
+    fill_normals(rng, row)
+    for j in range(row.shape[0]):
+        row[j] = yaw_c + std * row[j]
+
+
+@nb.njit(cache=True)
+def _level(x, up, pitch, roll):
+    """Rows U, PITCH, ROLL of ``x`` <- the navigation's (the loose cloud does not estimate them)."""
+    for j in range(x.shape[1]):
+        x[U, j] = up
+        x[PITCH, j] = pitch
+        x[ROLL, j] = roll
+
+
+@nb.njit(cache=True)
+def _move_cloud(x, rng, d_e, d_n, yaw_ref, dyaw, sig_pos, q_delta, noise_buf, block):
+    m = x.shape[1]
+    for lo in range(0, m, block):
+        n = min(block, m - lo)
+        noise = noise_buf[:3 * n].reshape((3, n))
+        fill_normals(rng, noise)
+        propagate_loose_turned(x, d_e, d_n, yaw_ref, dyaw, noise, sig_pos, q_delta, lo)
+
+
+@nb.njit(cache=True)
+def _restart_prior(xp, wp, x, w):
+    for c in range(x.shape[0]):
+        for j in range(x.shape[1]):
+            xp[c, j] = x[c, j]
+    for j in range(w.shape[0]):
+        wp[j] = w[j]
+
+
+@nb.njit(cache=True)
+def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
+    """:func:`~tanbench.filters.loose.loose_kalman_loop` with heading-offset particles (module
+    docstring). ``x`` (8, M): rows E, N hold the initial cloud (the rest is filled here);
+    ``track`` a :class:`TurnedTrack`, ``settings`` the loop's ``KalmanSettings`` and ``out`` its
+    ``KalmanOutputs`` (filters/loose.py), ``gates`` the :class:`Gates`."""
+    inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
+    model, rs, div, half_side, lik, guard, kf = settings
+    out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out, rejected_out, healthy_out = out
+    bias_limit, shape_min, dt = gates
+    sig_pos = model.sig_pos
+    converged_std = model.converged_std
+    m = x.shape[1]
+    steps = ranges.shape[0]
+    block = min(BLOCK, m)
+    logw = np.zeros(m)
+    ll = np.empty(m)
+    w = np.empty(m)
+    wp = np.full(m, 1.0 / m)
+    uni = np.empty(m)
+    idx = np.empty(m, dtype=np.int64)
+    scratch = np.empty_like(x)
+    xp = np.empty_like(x)
+    mean = np.empty(N_TIGHT)
+    v = np.empty(N_TIGHT)
+    cov = np.empty((2, 2))
+    mean_p = np.empty(N_TIGHT)
+    v_p = np.empty(N_TIGHT)
+    r = np.empty((2, 2))
+    dx = np.empty(N_ERROR)
+    p_save = np.empty((N_ERROR, N_ERROR))
+    m_prior = np.empty(2)
+    p_prior = np.empty((2, 2))
+    zt = np.empty(2)
+    nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
+    zero_noise = np.zeros((6, 1))
+    dist = np.zeros((2, 1))
+    dist_block = np.zeros((2, block))
+    noise_buf = np.empty(3 * block)
+    work = new_likelihood_work(block, 4 * grid.grids)
+    su2, _, out2 = beam_constants(model.sig_u, 1.0, model.outside_sigma)
+    nav[E, 0] = out_en[0, 0]
+    nav[N, 0] = out_en[0, 1]
+    nav[YAW, 0] = nav_yaw[0]
+    for c in range(BZ + 1):
+        if c != E and c != N:
+            for j in range(m):
+                x[c, j] = 0.0
+    _draw_headings(x, rng, nav[YAW, 0], math.sqrt(p_kf[EPSI, EPSI]))
+    _restart_prior(xp, wp, x, wp)
+    bad = 0
+    good = 0
+    since_fix = 0
+    rejections = 0
+    first_fix = True
+    p0_pos = p_kf[EE, EE]
+    p0_yaw = p_kf[EPSI, EPSI]
+    locked = False
+    consistent_chi = (0.5 * div.sigma) ** 2
+    for k in range(steps):
+        if k > 0:
+            e_before = nav[E, 0]
+            n_before = nav[N, 0]
+            yaw_before = nav[YAW, 0]
+            s, c = math.sin(nav[YAW, 0] - nav_yaw[k - 1]), math.cos(nav[YAW, 0] - nav_yaw[k - 1])
+            b_e = -(c * inc[k - 1, JAZE] - s * inc[k - 1, JAZN])
+            b_n = -(s * inc[k - 1, JAZE] + c * inc[k - 1, JAZN])
+            nav[U, 0] = nav_up[k - 1]
+            propagate_tight(nav, inc[k - 1], nav_yaw[k - 1], zero_noise, 0.0, 0.0, 0.0, DIST_NONE, dist)
+            d_e = nav[E, 0] - e_before
+            d_n = nav[N, 0] - n_before
+            dyaw = nav[YAW, 0] - yaw_before
+            q_delta = math.sqrt(kf.q_yaw * kf.q_yaw + p_kf[EB, EB] * dt * dt)
+            eskf_predict(p_kf, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
+            _move_cloud(x, rng, d_e, d_n, yaw_before, dyaw, sig_pos, q_delta, noise_buf, block)
+            _move_cloud(xp, rng, d_e, d_n, yaw_before, dyaw, sig_pos, q_delta, noise_buf, block)
+        _level(x, nav_up[k], nav_pitch[k], nav_roll[k])
+        vec = beam_vectors(beams, ranges[k])
+        att = attitude_reference(nav_pitch[k], nav_roll[k], nav[YAW, 0])
+        best = np.inf
+        for lo in range(0, m, block):
+            n = min(block, m - lo)
+            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist_block[:, :n], False, 0.0,
+                                               work_block(work, n), ll[lo:lo + n]))
+        mx = add_log_weights(logw, ll)
+        ess = normalise_with_ess(logw, mx, w)
+        weighted_estimate(x[:2], w, -1, 0.0, mean, v, cov)
+        spread = math.sqrt(v[0] + v[1])
+        healthy = spread < converged_std and best < consistent_chi
+        good = good + 1 if healthy else 0
+        locked = locked or healthy
+        since_fix += 1
+        fixed_out[k] = 0
+        rejected_out[k] = 0
+        if good >= div.steps and since_fix >= kf.fix_every:
+            since_fix = 0
+            shape_ok = shape_min <= 0.0 or unimodal_fraction(x, w, mean, cov) >= shape_min
+            # the window's prior: the never-weighted cloud's weighted mean and covariance
+            total = 0.0
+            for j in range(m):
+                total += wp[j]
+            for j in range(m):
+                wp[j] /= total
+            weighted_estimate(xp[:2], wp, -1, 0.0, mean_p, v_p, p_prior)
+            m_prior[0] = mean_p[0]
+            m_prior[1] = mean_p[1]
+            if shape_ok and terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r):
+                r[0, 0] += kf.r_floor * kf.r_floor
+                r[1, 1] += kf.r_floor * kf.r_floor
+                if first_fix:
+                    position_reset(p_kf, r)
+                    nav[E, 0] = zt[0]
+                    nav[N, 0] = zt[1]
+                    first_fix = False
+                    fixed_out[k] = 1
+                else:
+                    p_save[:, :] = p_kf
+                    chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
+                    if not chi2 < kf.gate:
+                        rejections += 1
+                        if rejections >= kf.misses:
+                            reopen_kf(p_kf, p0_pos, p0_yaw)
+                            p_save[:, :] = p_kf
+                            chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
+                    if chi2 < kf.gate and abs(nav[BZ, 0] + dx[EB]) > bias_limit:
+                        p_kf[:, :] = p_save  # the fix would make the gyro bias implausible
+                        chi2 = np.inf
+                    if chi2 < kf.gate:
+                        rejections = 0
+                        nav[E, 0] += dx[EE]
+                        nav[N, 0] += dx[EN]
+                        nav[YAW, 0] += dx[EPSI]  # the particles' absolute yaws stay: every delta -= dx_psi
+                        nav[BZ, 0] += dx[EB]
+                        fixed_out[k] = 1
+                    else:
+                        rejected_out[k] = 1
+            _restart_prior(xp, wp, x, w)
+        off_map = keep_on_map(nav[:2, 0], guard.bounds)
+        out_en[k, 0] = nav[E, 0]
+        out_en[k, 1] = nav[N, 0]
+        out_yaw[k] = nav[YAW, 0]
+        out_bias[k] = nav[BZ, 0]
+        var[k, 0] = p_kf[EE, EE]
+        var[k, 1] = p_kf[EN, EN]
+        var_yaw[k] = p_kf[EPSI, EPSI]
+        ess_out[k] = ess
+        healthy_out[k] = 1 if healthy else 0
+        reinit_out[k] = 0
+        if best < np.inf:
+            bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
+        if bad >= div.steps or off_map:
+            uniform_horizontal(x, rng, nav[E, 0], nav[N, 0], half_side)
+            _draw_headings(x, rng, nav[YAW, 0], math.sqrt(p_kf[EPSI, EPSI]))
+            for j in range(m):
+                w[j] = 1.0 / m
+            _restart_prior(xp, wp, x, w)
+            logw[:] = 0.0
+            bad = 0
+            good = 0
+            locked = False
+            first_fix = True
+            reinit_out[k] = 1
+            continue
+        resample_and_regularise(x, w, logw, ess, rng, rs, 3, spread, uni, idx, scratch)

@@ -1,0 +1,68 @@
+"""Reshaping a file terrain into another test world (issue 24): resampling, depth rescaling, transforms.
+
+``terrain.resample_m`` resamples the file's grid bilinearly onto square nodes of that
+spacing (from the grid's origin node); ``terrain.depth_range_m: [low, high]`` rescales the
+elevations linearly so that the lowest node is at ``low`` and the highest at ``high``;
+``terrain.transform`` then lays the same relief out differently: ``transpose`` (east and
+north swapped) or ``mirror-east`` (mirrored east-west), about the origin node. With these a
+sweep builds the issue's real-relief world from configs (a real DEM rescaled to -180..-60 m
+on 8 m truth nodes; the 24 m map is ``map_resolution_m``): ``configs/relief.yaml``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from tanbench.errors import TanbenchError
+from tanbench.terrain.grid import Map
+
+
+def reshape_terrain(grid: Map, resample_m: float | None, depth_range_m, transform: str) -> Map:
+    """``grid`` resampled, rescaled and transformed as the module says (each step optional)."""
+    z = grid.z
+    res_e, res_n = grid.res_e, grid.res_n
+    if resample_m is not None:
+        e = np.arange(0.0, grid.e_max - grid.e0 + 1e-9, resample_m)
+        n = np.arange(0.0, grid.n_max - grid.n0 + 1e-9, resample_m)
+        ee, nn = np.meshgrid(grid.e0 + e, grid.n0 + n)
+        z = grid.elevation(ee.ravel(), nn.ravel()).reshape(ee.shape)
+        res_e = res_n = float(resample_m)
+    if depth_range_m is not None:
+        lo, hi = float(depth_range_m[0]), float(depth_range_m[1])
+        zmin, zmax = np.nanmin(z), np.nanmax(z)
+        if not zmax > zmin:
+            raise TanbenchError("terrain depth_range_m: the file's grid is flat, there is nothing to rescale")
+        z = lo + (z - zmin) / (zmax - zmin) * (hi - lo)
+    if transform == "transpose":
+        z = z.T.copy()
+        res_e, res_n = res_n, res_e
+    elif transform == "mirror-east":
+        z = z[:, ::-1].copy()
+    if z is grid.z:
+        return grid
+    return replace(grid, z=z, res_e=res_e, res_n=res_n,
+                   meta={**grid.meta, "resample_m": resample_m, "depth_range_m": depth_range_m,
+                         "transform": transform})
+
+
+def reshape_terrain_numpy(z, e0, n0, res_e, res_n, resample_m, depth_range_m, transform):
+    """Plain reference on arrays (scipy's bilinear interpolation): the reshaped z."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    z = np.asarray(z, float)
+    if resample_m is not None:
+        ge = e0 + np.arange(z.shape[1]) * res_e
+        gn = n0 + np.arange(z.shape[0]) * res_n
+        e = e0 + np.arange(0.0, ge[-1] - e0 + 1e-9, resample_m)
+        n = n0 + np.arange(0.0, gn[-1] - n0 + 1e-9, resample_m)
+        nn, ee = np.meshgrid(n, e, indexing="ij")
+        z = RegularGridInterpolator((gn, ge), z)(np.stack([nn.ravel(), ee.ravel()], axis=1)).reshape(nn.shape)
+    if depth_range_m is not None:
+        z = depth_range_m[0] + (z - z.min()) / (z.max() - z.min()) * (depth_range_m[1] - depth_range_m[0])
+    if transform == "transpose":
+        z = z.T
+    elif transform == "mirror-east":
+        z = z[:, ::-1]
+    return z
