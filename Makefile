@@ -6,7 +6,7 @@ TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
 PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
 
-.PHONY: run test bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism check-numpy scaling clean
+.PHONY: criterion seafloors run test bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism check-numpy scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -53,6 +53,17 @@ paper-literal: $(VENV)/.installed-run
 	$(TB) report results/zhou2017-literal --discussion none
 	$(TB) run configs/zhou2017-literal-seed2.yaml --out results/zhou2017-literal-seed2 --quiet
 	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
+
+## criterion: the reproduction criterion's pass probabilities under a faithful copy of the paper, simulated from
+## the paper's numbers alone (docs/model.md section 11) into results/criterion/CRITERION.md
+criterion: $(VENV)/.installed-run
+	$(TB) criterion --out results/criterion/CRITERION.md
+
+## seafloors: the literal and recommended profiles on 5 more synthetic seafloors (configs/seafloors/, docs/model.md
+## section 11.1; 20 runs per cell, no series) into results/seafloors/<name>. Resumes like paper-literal.
+SEAFLOORS := $(sort $(wildcard configs/seafloors/*.yaml))
+seafloors: $(VENV)/.installed-run
+	for f in $(SEAFLOORS); do $(TB) run $$f --out results/seafloors/$$(basename $$f .yaml) --series none --quiet || exit 1; done
 
 ## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy
 ## (final errors only, no series), its table in results/zhou2017-anatomy/ANATOMY.md. Resumes like paper-literal.

@@ -307,6 +307,25 @@ def tables(
         typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
 
 
+@app.command(help="The reproduction criterion (docs/model.md section 11): pass probabilities of a faithful copy "
+                  "of Zhou et al. 2017, simulated from the paper's numbers, as Markdown."
+             + EXAMPLE.format("tanbench criterion --out results/criterion/CRITERION.md"))
+def criterion(
+    out: Optional[Path] = typer.Option(None, "--out", help="Write the Markdown here (default: print it)."),
+    reps: int = typer.Option(2000, "--reps", min=100, help="Simulated copies per scenario."),
+):
+    from tanbench import store
+    from tanbench.report import faithful_markdown
+
+    text = faithful_markdown(reps=reps)
+    if out is None:
+        typer.echo(text, nl=False)
+        return
+    out.parent.mkdir(parents=True, exist_ok=True)
+    store.write_text(text, out)
+    typer.echo(f"wrote {out}")
+
+
 @app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet or CSV, or as a "
              "mission log that `tanbench replay` reads (docs/missions.md)."
              + EXAMPLE.format("tanbench simulate --area A --seed 1 --out run.parquet"))
