@@ -6,7 +6,7 @@ TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
 PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
 
-.PHONY: criterion seafloors run test bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism check-numpy scaling clean
+.PHONY: criterion seafloors literal-family run test bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism check-numpy scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -64,6 +64,12 @@ criterion: $(VENV)/.installed-run
 SEAFLOORS := $(sort $(wildcard configs/seafloors/*.yaml))
 seafloors: $(VENV)/.installed-run
 	for f in $(SEAFLOORS); do $(TB) run $$f --out results/seafloors/$$(basename $$f .yaml) --series none --quiet || exit 1; done
+
+## literal-family: the literal profile with one other reading of the text at a time (docs/model.md section 11.2)
+## into results/zhou2017-literal-family and results/zhou2017-literal-family-loose (20 runs, no series). Resumes.
+literal-family: $(VENV)/.installed-run
+	$(TB) run configs/zhou2017-literal-family-loose.yaml --out results/zhou2017-literal-family-loose --series none --quiet
+	$(TB) run configs/zhou2017-literal-family.yaml --out results/zhou2017-literal-family --series none --quiet
 
 ## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy
 ## (final errors only, no series), its table in results/zhou2017-anatomy/ANATOMY.md. Resumes like paper-literal.

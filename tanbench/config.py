@@ -31,7 +31,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD, LIKELIHOOD_R,
-                              LOOSE_ARCHITECTURE, PROPAGATION, REGULARISATION, REGULARISED_STATES, RESAMPLING,
+                              LOOSE_ARCHITECTURE, POSITION_NOISE_GROWTH, PROPAGATION, REGULARISATION, REGULARISED_STATES, RESAMPLING,
                               choices)
 from tanbench.paperdata import scenario_facts
 
@@ -300,12 +300,16 @@ class FilterSpec(_Strict):
                                "std initial_area_m (Table 2's 150 m read as a standard deviation)")
     propagation: choices(PROPAGATION) = new_option(
         "exact", description="exact 100 Hz increments, or Eq. 1 as one Euler step over the sampling time with the "
-                             "DVL velocity and body turn rates averaged over the last second / at the update sample")
+                             "DVL velocity and body turn rates averaged over the last second / at the update sample / "
+                             "at the interval's start")
     initial_std_up_m: float = Field(0.1, ge=0)
     initial_std_pitch_roll_deg: float = Field(0.1, ge=0)
     initial_std_heading_deg: float = Field(30.0, ge=0)
     initial_std_gyro_bias_deg_h: float = Field(25.0, ge=0)
     process_noise_velocity_mps: float = Field(0.1, ge=0)
+    position_noise_growth: choices(POSITION_NOISE_GROWTH) = new_option(
+        "linear", description="the tight and loose particle filters' east/north process noise per update: "
+                              "process_noise_velocity_mps * T, or * sqrt(T) (a random walk in position)")
     process_noise_up_m: float = Field(0.01, ge=0)
     process_noise_attitude_deg_sqrt_h: float = Field(2.0, ge=0)
     measurement_noise_distance_m: float = Field(0.1, gt=0)

@@ -58,8 +58,15 @@ def resampling_of(f, regularised_cols: np.ndarray):
     return rs._replace(min_spread=0.0) if f.collapse_reinit == "initial" else rs
 
 
-# the Euler inputs' averaging window per propagation reading, seconds (0: the one IMU sample at the update)
-EULER_WINDOW_S = {"euler-last-second": 1.0, "euler-last-sample": 0.0}
+# the Euler inputs' averaging window per propagation reading, seconds (0: the one IMU sample at the update;
+# euler-interval-start: the one sample at the interval's start)
+EULER_WINDOW_S = {"euler-last-second": 1.0, "euler-last-sample": 0.0, "euler-interval-start": 0.0}
+
+
+def position_step_noise(f, T: float) -> float:
+    """East/north process noise std per update of the tight and loose particle filters:
+    ``process_noise_velocity_mps`` times T (``position_noise_growth: linear``) or sqrt(T) (``sqrt``)."""
+    return f.process_noise_velocity_mps * (math.sqrt(T) if f.position_noise_growth == "sqrt" else T)
 
 
 def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
@@ -70,6 +77,9 @@ def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
     if f.propagation == "exact":
         return np.zeros((max(upd.size - 1, 0), N_EULER))
     window = max(1, int(round(EULER_WINDOW_S[f.propagation] / obs.dt)))
+    if f.propagation == "euler-interval-start":
+        # interval m runs from upd[m] to upd[m+1]; its inputs are the one sample at upd[m]
+        upd = np.concatenate([upd[:1], upd[:-1] + 1])
     return compute_euler_inputs(obs.gyro, obs.dvl_velocity, nav.pitch, nav.roll, nav.yaw, obs.latitude_rad,
                                 upd, window)
 
@@ -135,7 +145,7 @@ def run_tight(ctx: MethodContext, sensor: str) -> MethodOutput:
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
     dist_mode = DISTANCE_INNOVATION[f.distance_innovation]
     sig_d, sig_u = measurement_sigmas(f)
-    model = TightModel(position_noise(f.process_noise_velocity_mps * T, sig_d, dist_mode),
+    model = TightModel(position_noise(position_step_noise(f, T), sig_d, dist_mode),
                        f.process_noise_up_m, f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
                        dist_mode, sig_d, sig_u, f.outside_map_sigma)
     readings = readings_bundle(f, T)
