@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
-PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
+PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d)))
 
 .PHONY: criterion seafloors literal-family run test bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism check-numpy scaling clean
 
@@ -55,7 +55,7 @@ paper-literal: $(VENV)/.installed-run
 	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
 
 ## criterion: the reproduction criterion's pass probabilities under a faithful copy of the paper, simulated from
-## the paper's numbers alone (docs/model.md section 11) into results/criterion/CRITERION.md
+## the paper's numbers alone (docs/model.md section 11) into results/criterion/CRITERION.md and faithful.csv
 criterion: $(VENV)/.installed-run
 	$(TB) criterion --out results/criterion/CRITERION.md
 
@@ -64,12 +64,14 @@ criterion: $(VENV)/.installed-run
 SEAFLOORS := $(sort $(wildcard configs/seafloors/*.yaml))
 seafloors: $(VENV)/.installed-run
 	for f in $(SEAFLOORS); do $(TB) run $$f --out results/seafloors/$$(basename $$f .yaml) --series none --quiet || exit 1; done
+	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
 
 ## literal-family: the literal profile with one other reading of the text at a time (docs/model.md section 11.2)
 ## into results/zhou2017-literal-family and results/zhou2017-literal-family-loose (20 runs, no series). Resumes.
 literal-family: $(VENV)/.installed-run
 	$(TB) run configs/zhou2017-literal-family-loose.yaml --out results/zhou2017-literal-family-loose --series none --quiet
 	$(TB) run configs/zhou2017-literal-family.yaml --out results/zhou2017-literal-family --series none --quiet
+	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
 
 ## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy
 ## (final errors only, no series), its table in results/zhou2017-anatomy/ANATOMY.md. Resumes like paper-literal.

@@ -439,6 +439,7 @@ def judge(runs: pd.DataFrame, series: pd.DataFrame | None = None, reps: int = 10
     """Cells and statements of ``runs`` under the criterion, with bootstrap intervals on the counts.
     ``set_claims``: {key: bool} for 2a, 2b and 6a as set in tanbench/claims.py (series statistics)."""
     sample, _ = observed_sample(runs)
+    lost = observed_sample(runs.assign(**{FINAL: runs["diverged"].astype(float)}))[0] if "diverged" in runs else {}
     modes = step_modes()
     cells = []
     for _, c in paper_cells().iterrows():
@@ -455,6 +456,7 @@ def judge(runs: pd.DataFrame, series: pd.DataFrame | None = None, reps: int = 10
                       "min": float(v.min()), "max": float(v.max()),
                       "above_paper_max": int((v > c["max"]).sum()), "below_paper_min": int((v < c["min"]).sum()),
                       "critical": extreme_critical(n),
+                      "lost": int(lost[(c["setting"], c["method"], FINAL)].sum()) if lost else -1,
                       "paper_mean": c["mean"], "paper_min": c["min"], "paper_max": c["max"],
                       "ratio": float(v.mean() / c["mean"]), "mean_ok": bool(mean_ok[0]), "extremes_ok": bool(ext_ok[0]),
                       "reproduced": bool(mean_ok[0] and ext_ok[0])})
@@ -480,13 +482,18 @@ def judge(runs: pd.DataFrame, series: pd.DataFrame | None = None, reps: int = 10
     n_stat = np.sum([bflags[k] for k in bflags if k in NINETEEN], axis=0) + fixed
     counts["statements"] = (int(nineteen.loc[known, "passes"].sum()), *np.percentile(n_stat, [2.5, 97.5]),
                             int(known.sum()))
+    simulable = [s.key for s in statements() if s.simulable and s.key in NINETEEN and s.key in flags]
+    if simulable:
+        counts["simulable"] = (int(sum(bool(flags[k][0]) for k in simulable)),
+                               *np.percentile(np.sum([bflags[k] for k in simulable], axis=0), [2.5, 97.5]),
+                               len(simulable))
     sea = [k for k in SEAFLOOR_STATEMENTS if k in flags]
     if sea:
         n_sea = np.sum([bflags[k] for k in sea], axis=0)
         counts["seafloor"] = (int(sum(bool(flags[k][0]) for k in sea)), *np.percentile(n_sea, [2.5, 97.5]), len(sea))
     claim_obs, claim_boot, n_claims = 0, 0, 0
     for claim in ORIGINAL_CLAIMS:
-        part = table[table["claim"] == claim]
+        part = nineteen[nineteen["claim"] == claim]
         if part["passes"].isna().any():
             continue
         n_claims += 1
@@ -505,4 +512,32 @@ def judge(runs: pd.DataFrame, series: pd.DataFrame | None = None, reps: int = 10
         counts["cells"] = (int(area_a["reproduced"].sum()), *np.percentile(bc, [2.5, 97.5]), len(area_a))
     elif len(area_a):
         counts["cells"] = (int(area_a["reproduced"].sum()), np.nan, np.nan, len(area_a))
+    # the other reading of Tables 3-7's "Mean Horizontal Position Error": time-averaged (reported, not counted)
+    hits = n_a = 0
+    for _, c in area_a.iterrows():
+        key = (c["setting"], c["method"], TIME_AVG)
+        if key in sample:
+            n_a += 1
+            hits += bool(cell_checks(sample[key], c["paper_mean"], -np.inf, np.inf)[0][0])
+    counts["time_avg_mean"] = (hits, np.nan, np.nan, n_a)
     return Judgement(cells, table, counts)
+
+
+# ---------------------------------------------------------------------------------------- subsets
+
+def table_subset(runs: pd.DataFrame, prefix: str) -> pd.DataFrame:
+    """The runs of the tables named ``prefix*`` (e.g. ``lit_`` or ``rec_`` of a many-seafloor sweep)."""
+    return runs[runs["tables"].astype(str).str.startswith(prefix)]
+
+
+def first_runs(runs: pd.DataFrame, n: int) -> pd.DataFrame:
+    """Runs 0 .. n-1 (the seeds a smaller sweep with the same root seed shares)."""
+    return runs[runs["run"] < n]
+
+
+def paired_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float]:
+    """Mean of a - b (paired by run) with its 95 % t interval."""
+    d = np.asarray(a, float) - np.asarray(b, float)
+    n = d.size
+    half = stats.t.ppf(0.975, n - 1) * d.std(ddof=1) / np.sqrt(n) if n > 1 else np.nan
+    return float(d.mean()), float(d.mean() - half), float(d.mean() + half)

@@ -160,7 +160,8 @@ def _claims_block(label: str, claims) -> list[str]:
 
 
 def write_report(directory, discussion: Path | None = None, literal: Path | None = None,
-                 anatomy: Path | None = None, other_seafloor: Path | None = None) -> Path:
+                 anatomy: Path | None = None, other_seafloor: Path | None = None, seafloors: Path | None = None,
+                 family: list[Path] | None = None) -> Path:
     """Write ``DIR/REPORT.md``; returns its path. ``literal``: results of the literal profile,
     shown beside (claims and tables); ``anatomy``: results of the anatomy sweep (its table);
     ``other_seafloor``: the literal profile on another seafloor (its fixed check)."""
@@ -208,7 +209,22 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
         parts.append(f"* the paper as written: `{literal}` (profile zhou2017-literal, docs/model.md section 10)")
     if anatomy is not None:
         parts.append(f"* the anatomy of the differences: `{anatomy}` (`configs/zhou2017-anatomy.yaml`)")
-    parts += ["", "## The paper's claims", "",
+    if literal is not None:
+        from tanbench.claims import evaluate as _evaluate
+        from tanbench.criterion import judge
+
+        def _judged(r, claims_list):
+            return judge(r, set_claims={c.key: c.reproduced for c in claims_list if c.key in ("2a", "2b", "6a")})
+
+        faithful_csv = directory.parent / "criterion" / "faithful.csv"
+        faithful_csv = faithful_csv if faithful_csv.exists() else None
+        parts += ["", criterion_section({"literal": _judged(lit_runs, lit_claims), "recommended": _judged(runs, claims)},
+                                        faithful_csv)]
+        if seafloors is not None:
+            parts += [seafloors_section(Path(seafloors), Path(literal), directory, faithful_csv)]
+        if family:
+            parts += [family_section([Path(f) for f in family], Path(literal))]
+    parts += ["", "## The paper's claims as set (section 10.1 of docs/model.md; counted as before)", "",
               "Each claim is a test in `tests/test_paper_claims.py` on these results (one-sided tests at 1 %; "
               "paired Wilcoxon where runs share their vehicle data, Mann-Whitney otherwise).", ""]
     if lit_claims is not None:
@@ -265,8 +281,9 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
 
 # ------------------------------------------------------------------------------------------------ criterion
 
-def faithful_markdown(reps: int = 2000) -> str:
-    """The criterion's pass probabilities under a faithful copy of the paper (``make criterion``)."""
+def faithful_markdown(reps: int = 2000) -> tuple[str, pd.DataFrame]:
+    """The criterion's pass probabilities under a faithful copy of the paper (``make criterion``), as Markdown
+    and as a table (key, runs, smallest probability over the scenarios) that the report reads."""
     from tanbench import criterion as cr
 
     modes = cr.choose_modes(reps=reps)
@@ -328,4 +345,287 @@ def faithful_markdown(reps: int = 2000) -> str:
         stat = "time-avg" if col == cr.TIME_AVG else "final"
         lines.append(f"| {s} | {m} | {stat} | {r['p_mean']:.3f} | {r['p_extremes']:.3f} | {r['p_cell']:.3f} |")
     lines.append(f"\nSmallest cell pass probability: {g['p_cell'].min():.3f}; median {g['p_cell'].median():.3f}.")
+    table = pd.concat([
+        rows.groupby("key")["p"].min().rename("p").reset_index().assign(runs=50),
+        rows20.groupby("key")["p"].min().rename("p").reset_index().assign(runs=20),
+        pd.DataFrame({"key": ["cell:" + "/".join(k) for k in g.index], "p": g["p_cell"].to_numpy(), "runs": 50})])
+    return "\n".join(lines) + "\n", table
+
+
+STATEMENT_CELLS = [("defaults", "Table 3 (defaults)"), ("map20", "Table 4: map 20 m"), ("map30", "Table 4: map 30 m"),
+                   ("noise2", "Table 5: noise 2 m"), ("noise3", "Table 5: noise 3 m"), ("T5", "Table 6: T = 5 s"),
+                   ("T10", "Table 6: T = 10 s"), ("p2000", "Table 7: 2000 particles"),
+                   ("p1000", "Table 7: 1000 particles"), ("vehicle", "Table 9: vehicle run")]
+
+
+def _faithful(path: Path | None) -> dict:
+    """{(key, runs): smallest pass probability of a faithful copy} from ``make criterion``'s faithful.csv."""
+    if path is None or not path.exists():
+        return {}
+    t = pd.read_csv(path)
+    return {(k, int(n)): float(p) for k, n, p in zip(t["key"], t["runs"], t["p"])}
+
+
+def _verdict_word(r) -> str:
+    if r["reproduced"]:
+        return "**yes**"
+    return {(False, True): "mean", (True, False): "range", (False, False): "mean, range"}[(r["mean_ok"], r["extremes_ok"])]
+
+
+def _cell_text(r) -> str:
+    lost = "" if r.get("lost", -1) < 0 else f"; lost {r['lost']}"
+    return (f"{r['mean']:.1f} [{r['ci_low']:.1f}, {r['ci_high']:.1f}]{lost}; x{r['ratio']:.2f}; "
+            f"{r['above_paper_max']}/{r['below_paper_min']}")
+
+
+def criterion_section(judged: dict, faithful_csv: Path | None = None) -> str:
+    """The reviewer's section: each profile's cells and statements under the criterion (docs/model.md
+    section 11), side by side, with the pass probability of a faithful copy beside each statement.
+    ``judged``: {label: criterion.Judgement}."""
+    from tanbench import criterion as cr
+
+    fp = _faithful(faithful_csv)
+    labels = list(judged)
+    lines = ["## The verdict under the reproduction criterion", "",
+             "The criterion (docs/model.md section 11, committed before any result it was built for) asks of each "
+             "cell: is the paper's mean inside the 95 % prediction interval of a 50-run mean of our runs, and are "
+             "the paper's [min, max] compatible with our runs (an exact rank test: fewer than k of our n runs "
+             "beyond each of the paper's extremes, k = 7 for 50 runs)? Of each statement: do one-sided t tests of "
+             "the means at 1 % go the paper's way (*directional*), or, where the paper's own numbers could not show "
+             "a step at 50 runs, at least not against it (*not reversed*)? `make criterion` simulates faithful copies "
+             "of the paper from its own numbers: the column *faithful* is the probability that such a copy passes "
+             "(the smallest over four distribution and pairing scenarios; `results/criterion/CRITERION.md`).", ""]
+    # counts
+    lines += ["### Counts, with bootstrap 95 % intervals (runs resampled within each world)", "",
+              "| count | " + " | ".join(labels) + " | a faithful copy (5th-95th percentile) |",
+              "|" + "---|" * (len(labels) + 2)]
+    faithful_range = {"simulable": "12-13 of 13", "claims": "-", "statements": "-", "cells": "20-27 of 27"}
+    names = {"simulable": "statements the paper's numbers can judge (13 of the 19)",
+             "statements": "all 19 statements (2a, 2b, 6a as set in claims.py)",
+             "claims": "the original 9 claims (conjunctions of their statements)",
+             "cells": "area-A cells reproduced (Tables 3-7, 27)",
+             "time_avg_mean": "area-A cells whose paper mean lies in the time-averaged error's interval (not counted)"}
+    faithful_range["time_avg_mean"] = "-"
+    for key in ("simulable", "statements", "claims", "cells", "time_avg_mean"):
+        vals = []
+        for lab in labels:
+            c = judged[lab].counts.get(key)
+            vals.append("-" if c is None else (f"{c[0]} of {c[3]}" + ("" if np.isnan(c[1]) else f" [{c[1]:.0f}, {c[2]:.0f}]")))
+        lines.append(f"| {names[key]} | " + " | ".join(vals) + f" | {faithful_range[key]} |")
+    lines += ["", "A faithful copy's 19-statement and 9-claim counts cannot be simulated: 2a, 2b, 3a-3c and 6a rest "
+                  "on figures and area B, for which the paper gives no numbers. Of the 6 claims the numbers can judge "
+                  "(1, 4a, 4b, 4c, 4d, 5), a faithful copy passes 5-6.", ""]
+    # statements
+    lines += ["### Statements", "",
+              "Verdict and, in brackets, the share of bootstrap resamples in which the statement passes.", "",
+              "| statement | " + " | ".join(labels) + " | faithful |", "|" + "---|" * (len(labels) + 2)]
+    first = judged[labels[0]].statements
+    for _, s in first.iterrows():
+        if s["key"] not in cr.NINETEEN:
+            continue
+        cells = []
+        for lab in labels:
+            r = judged[lab].statements.set_index("key").loc[s["key"]]
+            if r["passes"] is None or (isinstance(r["passes"], float) and np.isnan(r["passes"])):
+                cells.append("-")
+            else:
+                share = "" if np.isnan(r["boot_share"]) else f" ({r['boot_share']:.2f})"
+                cells.append(("passes" if r["passes"] else "fails") + share)
+        p = fp.get((s["key"], 50))
+        lines.append(f"| {s['key']}: {s['text']} | " + " | ".join(cells) + " | "
+                     + (f"{p:.3f}" if p is not None else "not derivable") + " |")
+    # cells
+    lines += ["", "### Cells beside the paper", "",
+              "Per profile: mean final error [95 % CI of the mean]; lost runs (final error above 75 m); ratio to the "
+              "paper's mean; our runs above the paper's maximum / below its minimum. Verdict: **yes**, or which part "
+              "fails (*mean*: the paper's mean outside the prediction interval; *range*: too many runs beyond an "
+              "extreme). A faithful copy passes a cell with probability 0.90-0.93 (CRITERION.md).", "",
+              "| cell | method | paper mean [min, max] | " + " | ".join(f"{lab} | verdict" for lab in labels) + " |",
+              "|" + "---|" * (3 + 2 * len(labels))]
+    for setting, title in STATEMENT_CELLS:
+        for m in cr.METHODS:
+            for col in (cr.FINAL, cr.TIME_AVG):
+                rows = [j.cells[(j.cells["setting"] == setting) & (j.cells["method"] == m) & (j.cells["column"] == col)]
+                        for j in judged.values()]
+                if rows[0].empty:
+                    continue
+                p = rows[0].iloc[0]
+                name = title + (" (time-averaged)" if col == cr.TIME_AVG else "")
+                parts = []
+                for r in rows:
+                    parts += ["-", "-"] if r.empty else [_cell_text(r.iloc[0]), _verdict_word(r.iloc[0])]
+                lines.append(f"| {name} | {m} | {p['paper_mean']:.1f} [{p['paper_min']:.1f}, {p['paper_max']:.1f}] | "
+                             + " | ".join(parts) + " |")
+    return "\n".join(lines) + "\n"
+
+
+SEAFLOOR_SETTINGS = ("defaults", "map30", "noise3", "T10", "p1000")
+
+
+def _seafloor_judgements(seafloors: Path, literal: Path | None, recommended: Path | None):
+    """[(name, terrain seed, H, profile, Judgement)] for every many-seafloor sweep under ``seafloors`` and, as
+    seafloor 1, the committed literal and recommended runs 0-19 in the same cells."""
+    from tanbench import criterion as cr
+    from tanbench.results import load
+
+    keep = lambda r: r[r["area"].eq("A")]  # noqa: E731
+    out = []
+    for label, d in (("literal", literal), ("recommended", recommended)):
+        if d is not None and (d / "sweep.yaml").exists():
+            r = keep(cr.first_runs(load(d), cr.SEAFLOOR_RUNS))
+            out.append(("seafloor-1 (committed, runs 0-19)", 1, 1.5, label, cr.judge(r)))
+    for d in sorted(p for p in seafloors.glob("seafloor-*") if (p / "sweep.yaml").exists()):
+        try:
+            runs = load(d)
+        except TanbenchError:  # a sweep not run yet
+            continue
+        if runs.empty:
+            continue
+        seed = int(runs["terrain.seed"].iloc[0])
+        h = runs["terrain.region_hurst.A"].dropna()
+        hurst = float(h.iloc[0]) if len(h) else 1.5
+        for label, prefix in (("literal", "lit_"), ("recommended", "rec_")):
+            sub = cr.table_subset(runs, prefix)
+            if not sub.empty:
+                out.append((d.name, seed, hurst, label, cr.judge(sub)))
+    return out
+
+
+def seafloors_section(seafloors: Path, literal: Path | None = None, recommended: Path | None = None,
+                      faithful_csv: Path | None = None) -> str:
+    """Many seafloors (docs/model.md section 11.1): verdicts per seafloor and how far the seafloor alone moves
+    each cell's mean."""
+    from tanbench import criterion as cr
+
+    judged = _seafloor_judgements(seafloors, literal, recommended)
+    if not judged:
+        return ""
+    fp = _faithful(faithful_csv)
+    lines = ["## Many seafloors (docs/model.md section 11.1)", "",
+             f"Area A on {len({j[0] for j in judged})} synthetic seafloors (terrain seed, root seed and the area-A "
+             "region's Hurst exponent H), the literal and recommended profiles, the defaults and the last value of "
+             f"Tables 4-7, {cr.SEAFLOOR_RUNS} runs per cell (seafloor 1: runs 0-19 of the committed 50-run "
+             "sweeps). Cells are judged with the criterion at 20 runs (the paper's mean in the prediction interval; "
+             f"fewer than {cr.extreme_critical(cr.SEAFLOOR_RUNS)} of 20 runs beyond each of the paper's extremes).",
+             "", "### Verdicts per seafloor", "",
+             "| seafloor | terrain seed | H | profile | cells reproduced (of 15) | statements passed (of 12) | "
+             + " | ".join(cr.SEAFLOOR_STATEMENTS) + " |", "|" + "---|" * (6 + len(cr.SEAFLOOR_STATEMENTS))]
+    per_profile = {}
+    for name, seed, hurst, label, j in judged:
+        st = j.statements.set_index("key")
+        flags = ["yes" if st.loc[k, "passes"] else "no" for k in cr.SEAFLOOR_STATEMENTS]
+        n_st = sum(f == "yes" for f in flags)
+        cells = j.cells[j.cells["setting"].isin(SEAFLOOR_SETTINGS)]
+        n_cells = int(cells["reproduced"].sum())
+        per_profile.setdefault(label, []).append((n_cells, n_st, j))
+        lines.append(f"| {name} | {seed} | {hurst:g} | {label} | {n_cells} | {n_st} | " + " | ".join(flags) + " |")
+    p_faith = [fp.get((k, cr.SEAFLOOR_RUNS)) for k in cr.SEAFLOOR_STATEMENTS]
+    if all(p is not None for p in p_faith):
+        lines.append("| faithful copy: pass probability at 20 runs | | | | | | "
+                     + " | ".join(f"{p:.2f}" for p in p_faith) + " |")
+    lines += [""]
+    for label, rows in per_profile.items():
+        n = len(rows)
+        cells = [r[0] for r in rows]
+        sts = [r[1] for r in rows]
+        lines.append(f"* **{label}**: over {n} seafloors, cells reproduced {min(cells)}-{max(cells)} of 15 "
+                     f"(median {np.median(cells):g}), statements passed {min(sts)}-{max(sts)} of 12 (median "
+                     f"{np.median(sts):g}). A new seafloor drawn like these falls inside the range of {n} with "
+                     f"probability {(n - 1) / (n + 1):.2f} (exchangeability, no model), so this range is the "
+                     "prediction for a tester's unseen seafloor and seed at that confidence.")
+    lines += ["", "### How far the seafloor alone moves each cell", "",
+              "Per profile and cell: the smallest and largest mean final error over the seafloors (each a "
+              f"{cr.SEAFLOOR_RUNS}-run mean), their ratio to the paper's mean, and whether the paper's mean lies "
+              "within the seafloors' range of means (then the seafloor alone, at this run count, can produce that "
+              "cell's difference from the paper).", "",
+              "| profile | cell | method | paper mean | seafloor means: min - max (m) | ratio to paper: min - max | "
+              "paper inside |", "|---|---|---|---|---|---|---|"]
+    inside = {}
+    for label, rows in per_profile.items():
+        for setting in SEAFLOOR_SETTINGS:
+            for m in cr.METHODS:
+                vals, paper = [], None
+                for _, _, j in rows:
+                    c = j.cells[(j.cells["setting"] == setting) & (j.cells["method"] == m) & (j.cells["column"] == cr.FINAL)]
+                    if len(c):
+                        vals.append(float(c["mean"].iloc[0]))
+                        paper = float(c["paper_mean"].iloc[0])
+                if not vals:
+                    continue
+                ok = min(vals) <= paper <= max(vals)
+                inside.setdefault(label, []).append(ok)
+                lines.append(f"| {label} | {setting} | {m} | {paper:.1f} | {min(vals):.1f} - {max(vals):.1f} | "
+                             f"{min(vals) / paper:.2f} - {max(vals) / paper:.2f} | {'yes' if ok else 'no'} |")
+    lines += [""] + [f"* {label}: the paper's mean lies within the seafloors' range in {sum(v)} of {len(v)} cells."
+                     for label, v in inside.items()]
+    return "\n".join(lines) + "\n"
+
+
+FAMILY_READINGS = {"det": "|R| as the determinant", "reinit": "collapsed cloud re-initialised whole (heading too)",
+                   "start": "Eq. 1's inputs at the interval start", "sqrt": "position noise growing with sqrt(T)",
+                   "kf": "loose TAN as Kalman-filter INS aiding"}
+
+
+def family_section(directories: list[Path], literal: Path) -> str:
+    """The literal family (docs/model.md section 11.2): each reading against the literal profile's runs 0-19."""
+    from tanbench import criterion as cr
+    from tanbench.results import load
+
+    dirs = [d for d in directories if (d / "sweep.yaml").exists()]
+    if not dirs or not (literal / "sweep.yaml").exists():
+        return ""
+    base_runs = cr.first_runs(load(literal), cr.SEAFLOOR_RUNS)
+    base_sample, _ = cr.observed_sample(base_runs[base_runs["area"].eq("A")])
+    base = cr.judge(base_runs[base_runs["area"].eq("A")])
+    lines = ["## The literal family: other readings of the text (docs/model.md section 11.2)", "",
+             "Each reading switched alone under the literal profile, 20 runs per cell, paired by run with the literal "
+             "profile's runs 0-19 (`results/zhou2017-literal`, shown as *literal*). Per cell: mean final error "
+             "[95 % CI], lost runs, the paired difference from the literal runs [95 % t interval], and the "
+             "criterion's cell verdict at 20 runs.", "",
+             "| reading | cell | method | mean [95 % CI] (m); lost | reading - literal [95 % CI] (m) | verdict | "
+             "literal: mean; lost; verdict |", "|---|---|---|---|---|---|---|"]
+    statements_rows = []
+    for d in dirs:
+        runs = load(d)
+        for reading, text in FAMILY_READINGS.items():
+            sub = cr.table_subset(runs, reading + "_")
+            if sub.empty:
+                continue
+            j = cr.judge(sub)
+            sample, _ = cr.observed_sample(sub)
+            for _, c in j.cells.iterrows():
+                if c["column"] != cr.FINAL:
+                    continue
+                key = (c["setting"], c["method"], cr.FINAL)
+                b = base.cells[(base.cells["setting"] == c["setting"]) & (base.cells["method"] == c["method"])
+                               & (base.cells["column"] == cr.FINAL)]
+                if key in base_sample and sample[key].shape == base_sample[key].shape:
+                    diff = cr.paired_difference(sample[key][0], base_sample[key][0])
+                    dtext = f"{diff[0]:+.1f} [{diff[1]:+.1f}, {diff[2]:+.1f}]"
+                else:
+                    dtext = "-"
+                btext = "-" if b.empty else (f"{b['mean'].iloc[0]:.1f}; {b['lost'].iloc[0]}; "
+                                              f"{_verdict_word(b.iloc[0])}")
+                lines.append(f"| {reading}: {text} | {c['setting']} | {c['method']} | {c['mean']:.1f} "
+                             f"[{c['ci_low']:.1f}, {c['ci_high']:.1f}]; {c['lost']} | {dtext} | {_verdict_word(c)} | "
+                             f"{btext} |")
+            st = j.statements.set_index("key")
+            for k in ("1a", "1b", "1c", "4c-tight-end", "4c-loose-end"):
+                if k in st.index and st.loc[k, "passes"] is not None and not (
+                        isinstance(st.loc[k, "passes"], float) and np.isnan(st.loc[k, "passes"])):
+                    statements_rows.append((reading, k, bool(st.loc[k, "passes"])))
+    bst = base.statements.set_index("key")
+    if statements_rows:
+        keys = sorted({k for _, k, _ in statements_rows}, key=lambda k: ["1a", "1b", "1c", "4c-tight-end",
+                                                                          "4c-loose-end"].index(k))
+        readings = list(dict.fromkeys(r for r, _, _ in statements_rows))
+        lines += ["", "Statements computable from each reading's cells (20 runs; the literal profile's runs 0-19 "
+                      "beside):", "", "| statement | literal | " + " | ".join(readings) + " |",
+                  "|" + "---|" * (2 + len(readings))]
+        got = {(r, k): p for r, k, p in statements_rows}
+        for k in keys:
+            lit = bst.loc[k, "passes"] if k in bst.index else None
+            lines.append(f"| {k} | {'-' if lit is None else ('passes' if lit else 'fails')} | "
+                         + " | ".join("-" if (r, k) not in got else ("passes" if got[(r, k)] else "fails")
+                                      for r in readings) + " |")
     return "\n".join(lines) + "\n"
