@@ -459,7 +459,7 @@ def criterion_section(judged: dict, faithful_csv: Path | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-SEAFLOOR_SETTINGS = ("defaults", "map30", "noise3", "T10", "p1000")
+SEAFLOOR_SETTINGS = ("defaults", "map30", "noise3", "T10", "p1000")  # those present are used
 
 
 def _seafloor_judgements(seafloors: Path, literal: Path | None, recommended: Path | None):
@@ -500,26 +500,32 @@ def seafloors_section(seafloors: Path, literal: Path | None = None, recommended:
     judged = _seafloor_judgements(seafloors, literal, recommended)
     if not judged:
         return ""
+    # the settings every seafloor has, and the statements they can judge
+    settings = [s for s in SEAFLOOR_SETTINGS if all((j.cells["setting"] == s).any() for *_, j in judged)]
+    keys = [k for k in cr.SEAFLOOR_STATEMENTS
+            if all(k in set(j.statements["key"]) and j.statements.set_index("key").loc[k, "passes"] is not None
+                   for *_, j in judged)]
     fp = _faithful(faithful_csv)
     lines = ["## Many seafloors (docs/model.md section 11.1)", "",
              f"Area A on {len({j[0] for j in judged})} synthetic seafloors (terrain seed, root seed and the area-A "
-             "region's Hurst exponent H), the literal and recommended profiles, the defaults and the last value of "
-             f"Tables 4-7, {cr.SEAFLOOR_RUNS} runs per cell (seafloor 1: runs 0-19 of the committed 50-run "
+             "region's Hurst exponent H), the literal and recommended profiles, in the cells "
+             f"{', '.join(settings)}, {cr.SEAFLOOR_RUNS} runs per cell (seafloor 1: runs 0-19 of the committed 50-run "
              "sweeps). Cells are judged with the criterion at 20 runs (the paper's mean in the prediction interval; "
              f"fewer than {cr.extreme_critical(cr.SEAFLOOR_RUNS)} of 20 runs beyond each of the paper's extremes).",
              "", "### Verdicts per seafloor", "",
-             "| seafloor | terrain seed | H | profile | cells reproduced (of 15) | statements passed (of 12) | "
-             + " | ".join(cr.SEAFLOOR_STATEMENTS) + " |", "|" + "---|" * (6 + len(cr.SEAFLOOR_STATEMENTS))]
+             "| seafloor | terrain seed | H | profile | cells reproduced | statements passed | "
+             + " | ".join(keys) + " |", "|" + "---|" * (6 + len(keys))]
     per_profile = {}
     for name, seed, hurst, label, j in judged:
         st = j.statements.set_index("key")
-        flags = ["yes" if st.loc[k, "passes"] else "no" for k in cr.SEAFLOOR_STATEMENTS]
+        flags = ["yes" if st.loc[k, "passes"] else "no" for k in keys]
         n_st = sum(f == "yes" for f in flags)
-        cells = j.cells[j.cells["setting"].isin(SEAFLOOR_SETTINGS)]
+        cells = j.cells[j.cells["setting"].isin(settings)]
         n_cells = int(cells["reproduced"].sum())
         per_profile.setdefault(label, []).append((n_cells, n_st, j))
-        lines.append(f"| {name} | {seed} | {hurst:g} | {label} | {n_cells} | {n_st} | " + " | ".join(flags) + " |")
-    p_faith = [fp.get((k, cr.SEAFLOOR_RUNS)) for k in cr.SEAFLOOR_STATEMENTS]
+        lines.append(f"| {name} | {seed} | {hurst:g} | {label} | {n_cells} of {len(cells)} | {n_st} of {len(keys)} | "
+                     + " | ".join(flags) + " |")
+    p_faith = [fp.get((k, cr.SEAFLOOR_RUNS)) for k in keys]
     if all(p is not None for p in p_faith):
         lines.append("| faithful copy: pass probability at 20 runs | | | | | | "
                      + " | ".join(f"{p:.2f}" for p in p_faith) + " |")
@@ -528,8 +534,9 @@ def seafloors_section(seafloors: Path, literal: Path | None = None, recommended:
         n = len(rows)
         cells = [r[0] for r in rows]
         sts = [r[1] for r in rows]
-        lines.append(f"* **{label}**: over {n} seafloors, cells reproduced {min(cells)}-{max(cells)} of 15 "
-                     f"(median {np.median(cells):g}), statements passed {min(sts)}-{max(sts)} of 12 (median "
+        lines.append(f"* **{label}**: over {n} seafloors, cells reproduced {min(cells)}-{max(cells)} of "
+                     f"{3 * len(settings)} (median {np.median(cells):g}), statements passed {min(sts)}-{max(sts)} of "
+                     f"{len(keys)} (median "
                      f"{np.median(sts):g}). A new seafloor drawn like these falls inside the range of {n} with "
                      f"probability {(n - 1) / (n + 1):.2f} (exchangeability, no model), so this range is the "
                      "prediction for a tester's unseen seafloor and seed at that confidence.")
@@ -542,7 +549,7 @@ def seafloors_section(seafloors: Path, literal: Path | None = None, recommended:
               "paper inside |", "|---|---|---|---|---|---|---|"]
     inside = {}
     for label, rows in per_profile.items():
-        for setting in SEAFLOOR_SETTINGS:
+        for setting in settings:
             for m in cr.METHODS:
                 vals, paper = [], None
                 for _, _, j in rows:
