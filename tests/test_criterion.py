@@ -49,7 +49,10 @@ def test_steps_and_modes():
     assert not cr.bound_pass(np.full((1, 50), 20.0) + np.linspace(-1, 1, 50), 10.0)[0]
 
 
-def test_faithful_copy_passes_the_simulable_statements_often():
+def test_faithful_copy_passes_the_simulable_statements_often(monkeypatch):
+    # modes from 300 copies here (make criterion uses 2000): a step near the 0.95 power line may differ
+    t = cr.choose_modes(reps=300)
+    monkeypatch.setattr(cr, "_MODES", dict(zip(t["step"], t["mode"])))
     rows, cells, counts = cr.faithful_pass(reps=300, seed=7)
     p = rows.groupby("key")["p"].min()
     assert (p[[k for k in cr.NINETEEN if k in p.index]] >= 0.85).all()  # >= 0.90 at 2000 copies (make criterion)
