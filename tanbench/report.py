@@ -581,7 +581,7 @@ def seafloors_section(seafloors: Path, literal: Path | None = None, recommended:
     return "\n".join(lines) + "\n"
 
 
-FAMILY_READINGS = {"det": "|R| as the determinant", "reinit": "collapsed cloud re-initialised whole (heading too)",
+FAMILY_READINGS = {"det": "\\|R\\| as the determinant", "reinit": "collapsed cloud re-initialised whole (heading too)",
                    "start": "Eq. 1's inputs at the interval start", "sqrt": "position noise growing with sqrt(T)",
                    "kf": "loose TAN as Kalman-filter INS aiding"}
 
