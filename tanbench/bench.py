@@ -25,6 +25,21 @@ import math
 import time
 
 import numpy as np
+from tanbench.config import Scenario
+from tanbench.filters import ekf, likelihood as L, mpf, pmf, tercom
+from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
+from tanbench.filters.likelihood import Likelihood, beam_vectors, likelihood_grid, likelihood_of
+from tanbench.filters.propagate import DIST_PARTICLE, propagate_loose, propagate_loose_numpy, propagate_tight, propagate_tight_numpy
+from tanbench.filters.resample import REG_LIU_WEST, SYSTEMATIC, add_log_weights, apply_resample, normalise_with_ess, normalize_log_weights, normalize_log_weights_numpy, regularise, resample_indices, resample_indices_numpy, shrink_jitter, shrink_jitter_numpy
+from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals
+from tanbench.filters.trig import attitude_reference
+from tanbench.methods import get, method_context, run_method
+from tanbench.methods.registry import builtin_names, names
+from tanbench.navigation.increments import compute_increments
+from tanbench.simulation import simulate_vehicle
+from tanbench.terrain.grid import gather_cells, node_grid
+from tanbench.terrain.representation import map_variance_grid
+from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 BENCH_SEED = 2017
 PARTICLE_FILTERS = ("tight-dvl", "tight-sbe", "loose-dvl")  # the ones that take filter.random_numbers
@@ -43,16 +58,11 @@ def _best(fn, n):
 
 
 def bench_scenario(particles: int, random_numbers: str | None = None):
-    from tanbench.config import Scenario
-
     return Scenario(particles=particles, filter={} if random_numbers is None else {"random_numbers": random_numbers})
 
 
 def run_figures(method: str, particles: int, repeats: int, random_numbers: str | None = None) -> dict:
     """Whole-run figures of ``method``: ns per cost unit (CPU and wall), run wall, calibrated cost."""
-    from tanbench.methods import get, run_method
-    from tanbench.simulation import simulate_vehicle
-
     scenario = bench_scenario(particles, random_numbers)
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(BENCH_SEED))
     units = float(get(method).cost_units(scenario))
@@ -79,14 +89,6 @@ def run_figures(method: str, particles: int, repeats: int, random_numbers: str |
 def bench_state(particles: int) -> dict:
     """The bench run half-way and a converged-looking tight cloud (8, M) about the truth there:
     what the kernel breakdown and the reference steps work on."""
-    from tanbench.filters.likelihood import beam_vectors
-    from tanbench.filters.trig import attitude_reference
-    from tanbench.methods import method_context
-    from tanbench.methods.tight import likelihood_bundle, likelihood_grid
-    from tanbench.navigation.increments import compute_increments
-    from tanbench.simulation import simulate_vehicle
-    from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
-
     scenario = bench_scenario(particles)
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(BENCH_SEED))
     ctx = method_context(scenario, "tight-dvl", vehicle, np.random.SeedSequence(1))
@@ -109,7 +111,7 @@ def bench_state(particles: int) -> dict:
                               np.array([nav.yaw[upd[k + 1]]]))[0]
     return dict(
         scenario=scenario, vehicle=vehicle, ctx=ctx, k=k, x0=x0, inc=inc[k], nav=nav, upd=upd, yaw_off=yaw_off,
-        yaw0=float(nav.yaw[upd[k]]), lik=likelihood_bundle(scenario.filter), grid=likelihood_grid(scenario.filter, ctx.nmap),
+        yaw0=float(nav.yaw[upd[k]]), lik=likelihood_of(scenario.filter), grid=likelihood_grid(scenario.filter, ctx.nmap),
         ranges=ranges, beams=np.ascontiguousarray(obs.dvl_beams), vec=beam_vectors(np.ascontiguousarray(obs.dvl_beams), ranges),
         att=attitude_reference(nav.pitch[upd[k + 1]], nav.roll[upd[k + 1]], nav.yaw[upd[k + 1]] + yaw_off),
         offsets=np.ascontiguousarray((obs.dvl_beams @ c.T) * ranges[:, None]), up=float(nav.pos[upd[k + 1], 2]),
@@ -126,14 +128,6 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
     """ns per particle (thread CPU) of each pass of one tight-dvl and one loose-dvl update on a
     mid-run cloud (the loops run these passes over blocks of the cloud; here each runs on the
     whole cloud, so the figures leave out the blocks' cache benefit)."""
-    from tanbench.filters import likelihood as L
-    from tanbench.filters.estimate import weighted_estimate
-    from tanbench.filters.propagate import DIST_PARTICLE, propagate_loose, propagate_tight
-    from tanbench.filters.resample import (REG_LIU_WEST, SYSTEMATIC, add_log_weights, apply_resample,
-                                           normalise_with_ess, regularise, resample_indices)
-    from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals
-    from tanbench.terrain.grid import gather_cells
-
     s = bench_state(particles)
     m, x0, grid, lik, vec = particles, s["x0"], s["grid"], s["lik"], s["vec"]
     x, ll, w, logw = x0.copy(), np.empty(m), np.empty(m), np.zeros(m)
@@ -192,16 +186,6 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
 
 def _pf_step(s, sensor: str, loose: bool):
     """One update of a particle filter's kernels, jitted and by their numpy references: (jit, numpy) callables."""
-    from tanbench.filters import likelihood as L
-    from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
-    from tanbench.filters.propagate import (DIST_PARTICLE, propagate_loose, propagate_loose_numpy, propagate_tight,
-                                            propagate_tight_numpy)
-    from tanbench.filters.resample import (SYSTEMATIC, apply_resample, normalize_log_weights,
-                                           normalize_log_weights_numpy, resample_indices, resample_indices_numpy,
-                                           shrink_jitter, shrink_jitter_numpy)
-    from tanbench.filters.rng import FastRng, fill_normals
-    from tanbench.terrain.representation import map_variance_grid
-
     m, lik, grid = s["x0"].shape[1], s["lik"], s["grid"]
     obs, nmap, f = s["vehicle"].obs, s["ctx"].nmap, s["scenario"].filter
     mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
@@ -253,10 +237,6 @@ def _pf_step(s, sensor: str, loose: bool):
 
 
 def _mpf_step(s):
-    from tanbench.filters import mpf
-    from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
-    from tanbench.filters.resample import normalize_log_weights, normalize_log_weights_numpy
-
     m = s["x0"].shape[1]
     za = s["ctx"].nmap.kernel_args()
     x0 = np.empty((mpf.N_MPF, m))
@@ -284,11 +264,6 @@ def _mpf_step(s):
 
 def _pmf_step(s, cells: int):
     """One heading slice of the point-mass filter: its nodes, the likelihood there, the blur, the moments."""
-    from tanbench.filters import likelihood as L
-    from tanbench.filters import pmf
-    from tanbench.filters.params import Likelihood
-    from tanbench.terrain.grid import node_grid
-
     nmap = s["ctx"].nmap
     za, grid, plain = nmap.kernel_args(), node_grid(nmap), Likelihood(False, 0, 4.0)
     ce, cn = float(s["x0"][0].mean()), float(s["x0"][1].mean())
@@ -312,8 +287,6 @@ def _pmf_step(s, cells: int):
 
 
 def _ekf_step(s):
-    from tanbench.filters import ekf
-
     za = s["ctx"].nmap.kernel_args()
     x0 = np.array([s["x0"][0].mean(), s["x0"][1].mean(), 0.01, 0.0])
     p0 = np.diag([25.0, 25.0, 1e-3, 1e-10])
@@ -332,8 +305,6 @@ def _ekf_step(s):
 
 
 def _tercom_step(s, pings: int = 30, half_cells: int = 10):
-    from tanbench.filters import tercom
-
     za = s["ctx"].nmap.kernel_args()
     rng = np.random.default_rng(6)
     pe = s["x0"][0, 0] + np.cumsum(rng.normal(1.0, 0.1, pings))
@@ -371,15 +342,11 @@ def reference_steps(particles: int = 3000, reps: int = 10) -> dict:
 
 def calibrated_cost_ns(particles: int = 3000, repeats: int = 2) -> dict[str, float]:
     """Per registered built-in method: thread-CPU ns per cost unit of a whole bench run."""
-    from tanbench.methods.registry import builtin_names
-
     return {m: run_figures(m, particles, repeats)["ns_per_unit_cpu"] for m in builtin_names()}
 
 
 def run_bench(particles: int = 3000, repeats: int = 3, methods=None) -> dict:
     """Measure and return every figure as a dict."""
-    from tanbench.methods.registry import names
-
     methods = list(methods or names())
     runs = []
     for method in methods:

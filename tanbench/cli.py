@@ -550,7 +550,7 @@ def terrain_suitability(
     import pandas as pd
 
     from tanbench.results import to_markdown
-    from tanbench.terrain.suitability import (MEASURES, plot_suitability, sensor_beams, sources_from, suitability,
+    from tanbench.suitability import (MEASURES, plot_suitability, sensor_beams, sources_from, suitability,
                                               track_summary, write_geotiff)
 
     if sensor not in ("dvl", "sbe"):

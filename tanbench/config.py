@@ -31,9 +31,11 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, INITIAL_CLOUD, LIKELIHOOD, LIKELIHOOD_R,
-                              LOOSE_ARCHITECTURE, POSITION_NOISE_GROWTH, PROPAGATION, REGULARISATION, REGULARISED_STATES, RESAMPLING,
+                              LOOSE_ARCHITECTURE, POSITION_NOISE_GROWTH, PROPAGATION, REGULARISATION,
+                              REGULARISED_STATES, RESAMPLING,
                               choices)
 from tanbench.paperdata import scenario_facts
+from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
 # Bump when a model's behaviour changes without a new option (the commit says why): every
 # cell key then changes, so no stored run is reused for results that would differ.
@@ -291,8 +293,22 @@ class NavigationSpec(_Strict):
     level_compensation: bool = Field(True, description="remove omega x v from the specific force")
 
 
+def position_noise(q: float, r: float, dist_mode: int) -> float:
+    """East/north noise per update: Table 2's q, or q combined with the distance noise r
+    (``filter.distance_innovation: particle``, :mod:`tanbench.filters.propagate`)."""
+    if dist_mode == DISTANCE_INNOVATION["particle"]:
+        return q * r / math.sqrt(q * q + r * r)
+    return q
+
+
 class FilterSpec(_Strict):
-    """Particle-filter settings (Table 2 as read in docs/model.md)."""
+    """Particle-filter settings (Table 2 as read in docs/model.md).
+
+    The defaults live here and only here: every kernel's parameter bundle is built from
+    this spec by one constructor next to the kernel (docs/architecture.md), and the derived
+    quantities (noise per update, the likelihood's sigmas) are the properties below and
+    on :class:`Scenario`.
+    """
 
     initial_area_m: float = Field(150.0, gt=0, description="side of the uniform initial square")
     initial_cloud: choices(INITIAL_CLOUD) = new_option(
@@ -361,6 +377,33 @@ class FilterSpec(_Strict):
     keep_on_map: bool = new_option(True, neutral=False, description="clamp the estimate into the map, reinitialise there [false]")
     divergence_spread_m: float | None = new_option(
         100.0, neutral=None, gt=0, description="horizontal cloud std counted as divergence [None: not checked]")
+    reinit_area_m: float | None = new_option(
+        None, gt=0, description="tight filter: side of the uniform square a reinitialised cloud (divergence, collapse, "
+                                "off the map) is redrawn over [None: initial_area_m]; a Gaussian initial_cloud keeps "
+                                "its std")
+
+    # ---- derived quantities -----------------------------------------------------
+    @property
+    def measurement_sigmas_m(self) -> tuple[float, float]:
+        """(distance, altitude) noise std of the particle filters' likelihood under ``likelihood_r``.
+
+        ``per-component``: Table 2's diag(0.1, 0.1, 1)^2 as given. ``scalar-norm``: Eq. 20's
+        single |R| as the norm of R (its largest variance), for every term.
+        ``scalar-determinant``: |R| as the determinant of R, taken as a variance in m^2.
+        """
+        d, u = self.measurement_noise_distance_m, self.measurement_noise_altitude_m
+        if self.likelihood_r == "per-component":
+            return d, u
+        variance = max(d * d, u * u) if self.likelihood_r == "scalar-norm" else (d * d) * (d * d) * (u * u)
+        return math.sqrt(variance), math.sqrt(variance)
+
+    @property
+    def initial_std_heading_rad(self) -> float:
+        return math.radians(self.initial_std_heading_deg)
+
+    @property
+    def initial_std_gyro_bias_rad_s(self) -> float:
+        return self.initial_std_gyro_bias_deg_h * DEG_PER_H
 
 
 class FaultSpec(_Strict):
@@ -444,6 +487,31 @@ class Scenario(_Strict):
                 f"({self.terrain.truth_resolution_m:g} m)")
         return self
 
+    # ---- derived quantities (computed here once for every method and the bound) --
+    def position_noise_m(self, distance_sigma_m: float | None = None) -> float:
+        """East/north process noise std per filter update (Table 2's q over the sampling time,
+        combined with the distance noise, by default ``filter.measurement_noise_distance_m``)."""
+        f = self.filter
+        r = f.measurement_noise_distance_m if distance_sigma_m is None else distance_sigma_m
+        return position_noise(self.position_step_m, r, DISTANCE_INNOVATION[f.distance_innovation])
+
+    @property
+    def position_step_m(self) -> float:
+        """Table 2's east/north process noise over one filter update: ``process_noise_velocity_mps`` times the
+        sampling time (``filter.position_noise_growth: linear``) or its square root (``sqrt``)."""
+        f, T = self.filter, self.sampling_time_s
+        return f.process_noise_velocity_mps * (math.sqrt(T) if f.position_noise_growth == "sqrt" else T)
+
+    @property
+    def attitude_noise_rad(self) -> float:
+        """Attitude process noise std per filter update (rad)."""
+        return self.filter.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(self.sampling_time_s)
+
+    @property
+    def planned_duration_s(self) -> float:
+        """The run's length for cost estimates: ``duration_s``, else the paper's 1190 s run."""
+        return self.duration_s or PAPER_RUN_S
+
     # ---- keys -------------------------------------------------------------------
     def normalized(self) -> dict:
         """The fully resolved spec as plain JSON-able data (every option, neutral ones included)."""
@@ -479,6 +547,7 @@ class Scenario(_Strict):
         return stable_hash(self.identity())
 
 
+PAPER_RUN_S = 1190.0  # the paper's run (Section 4.2), what a cost estimate assumes without duration_s
 WORLD_SECTIONS = ("terrain", "area", "trajectory", "sensors", "navigation", "duration_s", "faults")
 
 

@@ -17,6 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from tanbench.errors import TanbenchError
+from tanbench.methods.registry import get
+from tanbench.results import load, load_series
+from tanbench.sweep import load_results_sweep
+from tanbench.terrain import navigation_map
 
 # colours for methods whose record names none (user methods), in order of appearance
 SPARE_COLORS = ("tab:green", "tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
@@ -25,8 +29,6 @@ SPARE_COLORS = ("tab:green", "tab:orange", "tab:brown", "tab:pink", "tab:olive",
 def method_styles(methods) -> dict[str, tuple[str, str]]:
     """(line style, colour) per method: the registry's plot style, spare colours for the rest
     (and for a user method that cannot be imported where the figures are drawn)."""
-    from tanbench.methods.registry import get
-
     out, spare = {}, iter(SPARE_COLORS * 4)
     for m in methods:
         try:
@@ -38,7 +40,8 @@ def method_styles(methods) -> dict[str, tuple[str, str]]:
     return out
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib.pyplot on the Agg backend; one clear error line when matplotlib is missing."""
     try:
         import matplotlib
 
@@ -88,10 +91,7 @@ def select_cells(sweep, stored: set, wanted: list[str] | None) -> list:
 def plot_results(directory, cells: list[str] | None = None) -> list[Path]:
     """Write the figures of ``directory`` for the cells asked for (see :func:`select_cells`);
     returns the files written."""
-    plt = _pyplot()
-    from tanbench.results import load_series
-    from tanbench.sweep import load_results_sweep
-
+    plt = pyplot()
     directory = Path(directory)
     sweep = load_results_sweep(directory)
     series = load_series(directory)
@@ -106,8 +106,6 @@ def plot_results(directory, cells: list[str] | None = None) -> list[Path]:
 
 
 def _draw(sweep, cells, series, figdir: Path, plt) -> list[Path]:
-    from tanbench.terrain import navigation_map
-
     written = []
     defaults = {c.cell_id for c in representative_cells(sweep)}
     for cell in cells:
@@ -207,8 +205,6 @@ def _contours(ax, nmap, first, margin):
 def _track_maps(cells, series, figdir, plt, by_group: bool = False) -> list[Path]:
     """Tracks over the contours of each terrain (Figures 2-3): ``tracks.png``, ``tracks_2.png``, ...
     for the default cells, ``tracks_<first cell id>.png`` for others (``by_group``)."""
-    from tanbench.terrain import navigation_map
-
     out = []
     by_terrain = {}
     for cell in cells:
@@ -263,9 +259,7 @@ def plot_frontier(directory, cells=None) -> Path:
     """Accuracy against cost: mean final error against mean filter wall time per run, one panel per
     world, one line per method through its cells (budgets) in order of cost. ``cells``: only these
     cell ids (default: the cells of the tables named ``budget-*``, else all)."""
-    from tanbench.results import load
-
-    plt = _pyplot()
+    plt = pyplot()
     directory = Path(directory)
     runs = load(directory)
     if cells is None:

@@ -4,7 +4,7 @@ For every (results directory, cell, method) of one or more results directories:
 
 * **predictors**, computed from the scenario alone (no run is looked at):
   ``suitability_std_m``, the mean along the cell's true track (1 Hz) of the terrain
-  suitability's predicted position std after ``PINGS`` pings (``terrain.suitability``;
+  suitability's predicted position std after ``PINGS`` pings (``tanbench.suitability``;
   the method's sensor, the cell's navigation map and range noise, the track's median
   altitude); ``information_per_ping``, the mean along the track of trace(J_ping); and
   ``pcrb_mean_m``, the time average of the method's PCRB (``bounds.pcrb``);
@@ -27,6 +27,16 @@ import pandas as pd
 from scipy import stats
 
 from tanbench.errors import TanbenchError
+from tanbench import store
+from tanbench.bounds.pcrb import method_bound
+from tanbench.methods import get
+from tanbench.plot import method_styles, pyplot
+from tanbench.results import load, summarize, to_markdown
+from tanbench.simulation import motion_plan
+from tanbench.suitability import sensor_beams, suitability
+from tanbench.sweep import load_results_sweep
+from tanbench.terrain import navigation_map, truth_map
+from tanbench.vehicle.trajectory import sample_path
 
 PINGS = 10
 PREDICTORS = ("suitability_std_m", "information_per_ping", "pcrb_mean_m")
@@ -35,10 +45,6 @@ OUTCOMES = ("mean_time_avg_error_m", "mean_final_error_m")
 
 def cell_table(directory) -> pd.DataFrame:
     """Predictors and outcomes of every (cell, method) with successful runs in ``directory``."""
-    from tanbench.bounds.pcrb import method_bound, method_bound_spec
-    from tanbench.results import load, summarize
-    from tanbench.sweep import load_results_sweep
-
     directory = Path(directory)
     sweep = load_results_sweep(directory)
     runs = load(directory, status="ok")
@@ -48,14 +54,14 @@ def cell_table(directory) -> pd.DataFrame:
     for cell in sweep.cells:
         sc = cell.scenario
         for method in sweep.spec.methods:
-            spec = method_bound_spec(method) if (cell.cell_id, method) in summary.index else None
+            spec = get(method).bound if (cell.cell_id, method) in summary.index else None
             if spec is None:
                 continue
             sensor = spec[0]
             key = json.dumps([sc.world_key(), sc.map_resolution_m, sc.noise_m, sc.filter.initial_area_m, sensor])
             if key not in cache:
                 cache[key] = _track_suitability(sc, sensor)
-            bound = method_bound(sc, method)
+            bound = method_bound(sc, spec)
             s = summary.loc[(cell.cell_id, method)]
             rows.append({
                 "results": directory.name, "cell_id": cell.cell_id, "area": sc.area,
@@ -70,11 +76,6 @@ def cell_table(directory) -> pd.DataFrame:
 
 def _track_suitability(sc, sensor: str) -> dict:
     """Mean predicted std and information per ping along ``sc``'s true track."""
-    from tanbench.simulation import motion_plan
-    from tanbench.terrain import navigation_map, truth_map
-    from tanbench.terrain.suitability import sensor_beams, suitability
-    from tanbench.vehicle.trajectory import sample_path
-
     _, pos = sample_path(motion_plan(sc), 1.0)
     altitude = float(np.nanmedian(pos[:, 2] - truth_map(sc.terrain).elevation(pos[:, 0], pos[:, 1])))
     if sc.noise_m <= 0:
@@ -104,9 +105,7 @@ def correlations(cells: pd.DataFrame) -> pd.DataFrame:
 
 
 def plot_prediction(cells: pd.DataFrame, path: Path) -> None:
-    from tanbench.plot import _pyplot, method_styles
-
-    plt = _pyplot()
+    plt = pyplot()
     style = method_styles(sorted(set(cells["method"])))
     fig, axes = plt.subplots(1, len(PREDICTORS), figsize=(13, 4.2))
     markers = {"A": "o", "B": "s", "vehicle": "^", "custom": "D"}
@@ -125,9 +124,6 @@ def plot_prediction(cells: pd.DataFrame, path: Path) -> None:
 
 def write_prediction(directories, out) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The cells table, the correlations, and their files under ``out``."""
-    from tanbench.results import to_markdown
-    from tanbench import store
-
     frames = [cell_table(d) for d in directories]
     cells = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     if cells.empty:

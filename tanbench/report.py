@@ -12,6 +12,13 @@ import numpy as np
 import pandas as pd
 
 from tanbench.errors import TanbenchError
+from tanbench import store
+from tanbench.claims import evaluate, other_seafloor as other_seafloor_claim
+from tanbench.paper import compare_with_paper
+from tanbench.results import load, load_series, sweep_tables
+from tanbench.sweep import load_results_sweep
+from tanbench.anatomy import anatomy_markdown, anatomy_table
+from tanbench import criterion as cr
 
 TITLES = {
     "table3": "Table 3: area A, defaults (10 m map, noise +-1 m, 1 s, 3000 particles)",
@@ -165,12 +172,6 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
     """Write ``DIR/REPORT.md``; returns its path. ``literal``: results of the literal profile,
     shown beside (claims and tables); ``anatomy``: results of the anatomy sweep (its table);
     ``other_seafloor``: the literal profile on another seafloor (its fixed check)."""
-    from tanbench.claims import evaluate, other_seafloor as other_seafloor_claim
-    from tanbench.paper import compare_with_paper
-    from tanbench.results import load, load_series, sweep_tables
-    from tanbench import store
-    from tanbench.sweep import load_results_sweep
-
     directory = Path(directory)
     sweep = load_results_sweep(directory)
     missing = [name for name in TITLES if name not in sweep.table_designs]
@@ -210,11 +211,8 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
     if anatomy is not None:
         parts.append(f"* the anatomy of the differences: `{anatomy}` (`configs/zhou2017-anatomy.yaml`)")
     if literal is not None:
-        from tanbench.claims import evaluate as _evaluate
-        from tanbench.criterion import judge
-
         def _judged(r, claims_list):
-            return judge(r, set_claims={c.key: c.reproduced for c in claims_list if c.key in ("2a", "2b", "6a")})
+            return cr.judge(r, set_claims={c.key: c.reproduced for c in claims_list if c.key in ("2a", "2b", "6a")})
 
         faithful_csv = directory.parent / "criterion" / "faithful.csv"
         faithful_csv = faithful_csv if faithful_csv.exists() else None
@@ -247,8 +245,6 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
     else:
         parts += _claims_block("Results", claims)
     if anatomy is not None:
-        from tanbench.anatomy import anatomy_markdown, anatomy_table
-
         table = anatomy_table(load(anatomy), load_results_sweep(anatomy))
         parts += ["## The anatomy: one mechanism at a time", "",
                   "Starting from the literal profile, each row switches one mechanism to the recommended "
@@ -285,7 +281,6 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
 def faithful_markdown(reps: int = 2000) -> tuple[str, pd.DataFrame]:
     """The criterion's pass probabilities under a faithful copy of the paper (``make criterion``), as Markdown
     and as a table (key, runs, smallest probability over the scenarios) that the report reads."""
-    from tanbench import criterion as cr
 
     modes = cr.choose_modes(reps=reps)
     rows, cells, counts = cr.faithful_pass(reps=reps)
@@ -383,7 +378,6 @@ def criterion_section(judged: dict, faithful_csv: Path | None = None) -> str:
     """The reviewer's section: each profile's cells and statements under the criterion (docs/model.md
     section 11), side by side, with the pass probability of a faithful copy beside each statement.
     ``judged``: {label: criterion.Judgement}."""
-    from tanbench import criterion as cr
 
     fp = _faithful(faithful_csv)
     labels = list(judged)
@@ -467,8 +461,6 @@ def _seafloor_judgements(seafloors: Path, literal: Path | None, recommended: Pat
                          literal_seed2: Path | None = None):
     """[(name, terrain seed, H, profile, Judgement)] for every many-seafloor sweep under ``seafloors`` and, as
     seafloor 1, the committed literal and recommended runs 0-19 in the same cells."""
-    from tanbench import criterion as cr
-    from tanbench.results import load
 
     keep = lambda r: r[r["area"].eq("A")]  # noqa: E731
     out, skipped = [], []
@@ -485,8 +477,6 @@ def _seafloor_judgements(seafloors: Path, literal: Path | None, recommended: Pat
             continue
         if runs.empty:
             continue
-        from tanbench.sweep import load_results_sweep
-
         sweep = load_results_sweep(d)
         expected = len(sweep.cells) * len(sweep.spec.methods) * sweep.spec.runs
         if int((runs["status"] == "ok").sum()) < expected:  # unfinished: left out, said in the section
@@ -506,7 +496,6 @@ def seafloors_section(seafloors: Path, literal: Path | None = None, recommended:
                       faithful_csv: Path | None = None, literal_seed2: Path | None = None) -> str:
     """Many seafloors (docs/model.md section 11.1): verdicts per seafloor and how far the seafloor alone moves
     each cell's mean."""
-    from tanbench import criterion as cr
 
     judged, skipped = _seafloor_judgements(seafloors, literal, recommended, literal_seed2)
     if not judged:
@@ -588,8 +577,6 @@ FAMILY_READINGS = {"det": "\\|R\\| as the determinant", "reinit": "collapsed clo
 
 def family_section(directories: list[Path], literal: Path) -> str:
     """The literal family (docs/model.md section 11.2): each reading against the literal profile's runs 0-19."""
-    from tanbench import criterion as cr
-    from tanbench.results import load
 
     dirs = [d for d in directories if (d / "sweep.yaml").exists()]
     if not dirs or not (literal / "sweep.yaml").exists():

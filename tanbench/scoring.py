@@ -49,8 +49,8 @@ def score(scenario, vehicle, updates, out, wall: float, method: str | None = Non
           bound=None) -> RunResult:
     """Metrics and series of one method's checked output ``out`` on one run.
 
-    ``method`` names the method for its posterior Cramer-Rao bound (none without a name),
-    unless ``bound`` gives the bound's series; ``nmap`` is the navigation map (default:
+    ``bound`` is the method's posterior Cramer-Rao bound series in this cell
+    (:func:`tanbench.bounds.pcrb.method_bound`; None: no bound); ``nmap`` is the navigation map (default:
     the scenario's). ``vehicle`` has the observations (``obs``) and the truth (``truth``:
     t, pos, yaw at the IMU samples), simulated or a mission log's reference.
     """

@@ -29,6 +29,7 @@ from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
 from tanbench.terrain import truth_map
 from tanbench.vehicle.trajectory import MotionPlan, Truth, paper_plan, simulate_truth, survey_plan, vehicle_run_plan
+from tanbench.vehicle.attitude import yaw_to_heading_deg
 
 # named random streams of a run (spawn-key suffixes)
 STREAM_INITIAL, STREAM_IMU, STREAM_DVL_VELOCITY, STREAM_DVL_RANGES, STREAM_SBE_RANGES, STREAM_PRESSURE = range(6)
@@ -244,7 +245,6 @@ def vehicle_frame(vehicle: VehicleData, every: int = 1):
     """
     import pandas as pd
 
-    from tanbench.vehicle.attitude import yaw_to_heading_deg
 
     tr, obs = vehicle.truth, vehicle.obs
     nav = obs.nav

@@ -36,6 +36,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from tanbench.errors import TanbenchError
+from tanbench import __version__
 
 SCHEMA_VERSION = 3  # 3: Hive-partitioned runs/cell_id=<id>/, one fixed run-file schema, merged cells
 META_KEY = b"tanbench"
@@ -65,7 +66,6 @@ def provenance(sweep_text: str, sweep_name: str, root_seed: int) -> dict:
     import numba
     import numpy
 
-    from tanbench import __version__
 
     return {
         "schema_version": SCHEMA_VERSION,

@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from tanbench.config import Scenario, flatten, format_validation_error, plain_number_check
 from tanbench.errors import TanbenchError
+from tanbench.profiles import PROFILES, profile_settings
 
 Value = Any
 DEFAULT_METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")  # the paper's, when a sweep names none
@@ -97,8 +98,6 @@ class SweepSpec(BaseModel):
     @field_validator("profile")
     @classmethod
     def _known_profile(cls, v):
-        from tanbench.profiles import PROFILES
-
         if v is not None and v not in PROFILES:
             raise ValueError(f"unknown profile {v!r} (known: {', '.join(PROFILES)})")
         return v
@@ -319,8 +318,6 @@ def expand(spec: SweepSpec, label: str) -> tuple[list[Cell], dict[str, list[str]
         designs.append(("grid", spec.grid))
     if not designs:
         designs = [("default", {})]
-    from tanbench.profiles import profile_settings
-
     base: dict = {}
     for k, v in profile_settings(spec.profile).items():  # the profile, under the sweep's scenario
         _set_dotted(base, k, v)

@@ -32,6 +32,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tanbench.errors import TanbenchError
+from tanbench.config import Scenario
+from tanbench.methods import get, run_method
+from tanbench.methods.api import update_indices
+from tanbench.runner.executors import single_thread_environment
+from tanbench.schema import METRIC_COLUMNS, SERIES_COLUMNS
+from tanbench.simulation import simulate_vehicle
+from tanbench.terrain import navigation_map
 
 CHECK_SEED = 20261201
 
@@ -46,16 +53,11 @@ class ConformanceReport:
 
 def default_check_scenario():
     """A short area-A scenario (90 s, 300 particles): a few seconds per method."""
-    from tanbench.config import Scenario
-
     return Scenario(duration_s=90.0, particles=300)
 
 
 def check_method(method: str, scenario=None, executors: bool = True) -> ConformanceReport:
     """Check that ``method`` (a registered name or ``package.module:function``) conforms."""
-    from tanbench.methods import get, run_method
-    from tanbench.simulation import simulate_vehicle
-
     record = get(method)
     scenario = scenario or default_check_scenario()
     report = ConformanceReport(method)
@@ -87,8 +89,6 @@ def check_method(method: str, scenario=None, executors: bool = True) -> Conforma
 
 
 def _nav_map(scenario):
-    from tanbench.terrain import navigation_map
-
     return navigation_map(scenario.terrain, scenario.map_resolution_m)
 
 
@@ -100,9 +100,6 @@ def _run(run_method, scenario, method, vehicle, seed):
 
 
 def _check_contract(result, vehicle, scenario, record) -> None:
-    from tanbench.methods.api import update_indices
-    from tanbench.schema import METRIC_COLUMNS, SERIES_COLUMNS
-
     k = update_indices(scenario, vehicle.obs).size
     missing = [m for m in METRIC_COLUMNS if m not in result.metrics]
     assert not missing, f"{record.name}: metrics missing {missing}"
@@ -146,10 +143,6 @@ def _assert_same_tree(a, b, path) -> None:
 
 def _worker_run(scenario_json: str, method: str):
     """In a spawned worker: simulate the same run and run the method (as the sweep engine does)."""
-    from tanbench.config import Scenario
-    from tanbench.methods import run_method
-    from tanbench.simulation import simulate_vehicle
-
     scenario = Scenario(**json.loads(scenario_json))
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(CHECK_SEED))
     return run_method(scenario, method, vehicle, np.random.SeedSequence(1))
@@ -159,7 +152,6 @@ def _run_in_worker(scenario, method):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from tanbench.runner.executors import single_thread_environment
 
     with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
                              initializer=single_thread_environment) as pool:
@@ -170,8 +162,6 @@ def _run_in_worker(scenario, method):
 
 
 def _check_refuses_bad_options(scenario, method, record, vehicle) -> None:
-    from tanbench.methods import run_method
-
     bad = scenario.model_copy(update={"method_options": {method: {"no_such_option_": 1}}})
     try:
         run_method(bad, method, vehicle, np.random.SeedSequence(1))

@@ -16,7 +16,7 @@ import hashlib
 import json
 import os
 import shutil
-import time
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -138,10 +138,10 @@ def regular_file(tmp):
     return {"out": str(tmp / "a-file")}
 
 
-def case(id, args, data, *fragments, setup=None, max_s=None, code=2, then=None, absent=()):
+def case(id, args, data, *fragments, setup=None, hang_s=240, code=2, then=None, absent=()):
     """One row: CLI ``args``, the sweep file's ``data``, text the output must hold (``fragments``)
     and must not (``absent``)."""
-    return pytest.param(args, data, fragments, setup, max_s, code, then, absent, id=id)
+    return pytest.param(args, data, fragments, setup, hang_s, code, then, absent, id=id)
 
 
 def csv_header(expected):
@@ -343,7 +343,7 @@ CASES = [
          then=csv_header("area,terrain,points,depth_mean_m,depth_std_m,depth_min_m,depth_max_m,mean_slope_deg,"
                          "off_map_points,map_rms_10m,map_rms_20m,map_rms_30m")),
     case("dask-scheduler-not-answering", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "tcp://127.0.0.1:1"],
-         BASE, "cannot reach the Dask scheduler at tcp://127.0.0.1:1", max_s=30),
+         BASE, "cannot reach the Dask scheduler at tcp://127.0.0.1:1", hang_s=120),
 ]
 
 
@@ -424,14 +424,14 @@ CASES += [
     case("cruise-too-long-for-memory", ["validate", "{sweep}"],
          sweep(scenario__duration_s=None, scenario__trajectory__cruise_s=1e7),
          "a run lasts 10000350 s at sensors.imu_rate_hz=100 (1e+09 IMU samples): its vehicle data would take "
-         "about", "shorten the trajectory", max_s=120),
+         "about", "shorten the trajectory", hang_s=240),
     # the sweep file itself
     case("sweep-file-is-a-fifo", ["validate", "{tmp}/fifo.yaml"], None, "fifo.yaml: not a regular file",
-         setup=fifo, max_s=60),
+         setup=fifo, hang_s=120),
     case("sweep-file-too-large", ["validate", "{tmp}/huge.yaml"], None, "is too large for a sweep file",
          setup=huge_sweep_file),
     case("yaml-alias-bomb", ["validate", "{sweep}"], ALIAS_BOMB, "the YAML's aliases (*name) expand to",
-         "an alias bomb?", max_s=60),
+         "an alias bomb?", hang_s=120),
     case("yaml-nested-too-deeply", ["validate", "{sweep}"], NESTED, "the YAML is nested too deeply"),
     # results directories
     case("out-empty", ["run", "{sweep}", "--out", ""], BASE, "--out '': give the results directory a name"),
@@ -559,16 +559,17 @@ def snapshot(root: Path) -> dict[str, str]:
     return out
 
 
-@pytest.mark.parametrize("args, data, fragments, setup, max_s, code, then, absent", CASES)
-def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, setup, max_s, code, then, absent):
+@pytest.mark.parametrize("args, data, fragments, setup, hang_s, code, then, absent", CASES)
+def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, setup, hang_s, code, then, absent):
     """Bad input: one `error:` line naming the problem, exit 2, no traceback, nothing stored changed.
     (The cases with another ``code`` say what they print instead, on stdout or stderr.)"""
     argv = prepare(tmp_path, maps, args, data, setup)
     root_results = snapshot(ROOT / "results")
     before = snapshot(tmp_path)
-    started = time.monotonic()
-    proc = cli(*argv, timeout=240)
-    elapsed = time.monotonic() - started
+    try:  # a hang detector, not a speed assertion: the command is given far more than it needs
+        proc = cli(*argv, timeout=hang_s)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"the command hung (no answer in {hang_s} s): {argv}")
     assert proc.returncode == code, (proc.returncode, proc.stdout[-2000:], proc.stderr)
     assert "Traceback" not in proc.stderr + proc.stdout
     assert "Warning" not in proc.stderr, proc.stderr
@@ -587,8 +588,6 @@ def test_bad_input_gives_one_error_line(tmp_path, maps, args, data, fragments, s
     else:
         then(tmp_path, proc)
     assert snapshot(ROOT / "results") == root_results
-    if max_s is not None:
-        assert elapsed < max_s
 
 
 def test_holes_are_accepted_when_filled(tmp_path, maps):

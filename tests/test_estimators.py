@@ -11,7 +11,8 @@ import pytest
 from tanbench.config import Scenario
 from tanbench.filters import mpf
 from tanbench.methods import update_indices
-from tanbench.navigation.increments import compute_increments
+from tanbench.methods.mpf import MpfOptions
+from tanbench.navigation.increments import NavAtUpdates, compute_increments
 from tanbench.simulation import simulate_vehicle
 from tanbench.terrain import navigation_map
 
@@ -29,9 +30,10 @@ def test_mpf_estimates_a_depth_bias(run):
     rows, upd = updates.rows, updates.imu
     nav = v.obs.nav
     inc = compute_increments(v.obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
-    out = mpf.run_mpf(nav.pos[upd, :2], nav.pos[upd, 2] + 3.0, nav.pitch[upd], nav.roll[upd], nav.yaw[upd], inc,
-                      v.obs.dvl_beams, v.obs.dvl_ranges[rows], nmap.kernel_args(), np.random.default_rng([SEED, run]),
-                      particles=500)
+    tide = NavAtUpdates(nav.pos[upd, :2], nav.pos[upd, 2] + 3.0, nav.pitch[upd], nav.roll[upd], nav.yaw[upd])
+    settings = mpf.mpf_settings(sc.model_copy(update={"particles": 500}), MpfOptions())
+    out = mpf.run_mpf(tide, inc, v.obs.dvl_beams, v.obs.dvl_ranges[rows], nmap.kernel_args(),
+                      np.random.default_rng([SEED, run]), settings)
     assert out["depth_bias_m"][-1] == pytest.approx(3.0, abs=0.6)
     err = np.hypot(out["est_e"][-1] - v.truth.pos[upd[-1], 0], out["est_n"][-1] - v.truth.pos[upd[-1], 1])
     assert err < 10.0

@@ -24,12 +24,12 @@ from scipy.special import logsumexp
 
 from filters_support import KERNEL_SEED, VEHICLE_SEED
 from tanbench.options import REGULARISATION, RESAMPLING
-from tanbench.config import Scenario
+from tanbench.config import Scenario, position_noise
 from tanbench.filters import estimate as est_mod
 from tanbench.filters import likelihood as lik
 from tanbench.filters import propagate as prop
 from tanbench.filters import resample as rs
-from tanbench.filters.params import Likelihood
+from tanbench.filters.likelihood import Likelihood
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.navigation import increments as incmod
 from tanbench.navigation.increments import compute_increments
@@ -122,7 +122,7 @@ def test_propagate_tight_matches_numpy(world, increments, dist_mode):
         nav = v.obs.nav
         x0 = tight_cloud(rng, m, nav.pos[k0, :2], nav.pos[k0, 2], nav.pitch[k0], nav.roll[k0], nav.yaw[k0])
         noise = rng.standard_normal((6, m))
-        sig_pos = prop.position_noise(0.1 * 10, 0.1, dist_mode)
+        sig_pos = position_noise(0.1 * 10, 0.1, dist_mode)
         x = x0.copy()
         innov = np.full((2, m), np.nan)  # written for the navigation reading only
         prop.propagate_tight(x, inc[row], nav.yaw[k0], noise, sig_pos, 0.01, 3e-4, dist_mode, innov)
@@ -162,11 +162,11 @@ def test_propagate_tight_geometry(world, increments):
 
 def test_position_noise():
     q, r = 1.0, 0.1
-    assert prop.position_noise(q, r, prop.DIST_PARTICLE) == pytest.approx(q * r / math.sqrt(q * q + r * r), rel=1e-15)
-    assert prop.position_noise(q, r, prop.DIST_NONE) == q
-    assert prop.position_noise(q, r, prop.DIST_NAVIGATION) == q
+    assert position_noise(q, r, prop.DIST_PARTICLE) == pytest.approx(q * r / math.sqrt(q * q + r * r), rel=1e-15)
+    assert position_noise(q, r, prop.DIST_NONE) == q
+    assert position_noise(q, r, prop.DIST_NAVIGATION) == q
     # the combined noise is below both (the product of two Gaussians is narrower)
-    assert prop.position_noise(q, r, prop.DIST_PARTICLE) < min(q, r)
+    assert position_noise(q, r, prop.DIST_PARTICLE) < min(q, r)
 
 
 def test_propagate_loose_matches_numpy(world, increments):

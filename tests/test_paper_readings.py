@@ -13,7 +13,7 @@ from tanbench.config import Scenario
 from tanbench.errors import TanbenchError
 from tanbench.filters import propagate as prop
 from tanbench.filters.cloud import gaussian_horizontal, gaussian_horizontal_numpy
-from tanbench.methods.tight import measurement_sigmas
+
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.navigation import increments as incmod
 from tanbench.navigation.increments import compute_euler_inputs, compute_increments, euler_inputs_numpy
@@ -144,7 +144,7 @@ def test_gaussian_horizontal_matches_numpy():
                                              ("scalar-determinant", (0.01, 0.01))])
 def test_measurement_sigmas(reading, expect):
     f = Scenario(filter={"likelihood_r": reading}).filter
-    assert measurement_sigmas(f) == pytest.approx(expect)
+    assert f.measurement_sigmas_m == pytest.approx(expect)
 
 
 def test_new_options_at_neutral_change_no_key():
@@ -266,13 +266,12 @@ def test_literal_family_options_neutral_and_acting():
         assert s.cell_key() != base.cell_key() and s.world_key() == base.world_key()
 
 
-def test_position_step_noise_grows_with_t_or_its_root():
-    from tanbench.methods.tight import position_step_noise
-
-    lin, root = (Scenario(filter={"position_noise_growth": g}).filter for g in ("linear", "sqrt"))
-    assert position_step_noise(lin, 10.0) == pytest.approx(1.0)
-    assert position_step_noise(root, 10.0) == pytest.approx(0.1 * math.sqrt(10.0))
-    assert position_step_noise(lin, 1.0) == position_step_noise(root, 1.0)
+def test_position_step_grows_with_t_or_its_root():
+    lin, root = (Scenario(sampling_time_s=10.0, filter={"position_noise_growth": g}) for g in ("linear", "sqrt"))
+    assert lin.position_step_m == pytest.approx(1.0)
+    assert root.position_step_m == pytest.approx(0.1 * math.sqrt(10.0))
+    one = [Scenario(filter={"position_noise_growth": g}).position_step_m for g in ("linear", "sqrt")]
+    assert one[0] == one[1]
 
 
 def test_euler_inputs_at_the_interval_start(run_inputs):

@@ -20,7 +20,7 @@ from tanbench.config import Scenario
 from tanbench.filters import likelihood as lik
 from tanbench.filters import propagate as prop
 from tanbench.filters import resample as rs
-from tanbench.filters.params import Likelihood
+from tanbench.filters.likelihood import Likelihood
 from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals, fill_uniforms, loop_rng
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference

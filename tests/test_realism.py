@@ -16,7 +16,7 @@ import pytest
 from filters_support import KERNEL_SEED, VEHICLE_SEED, filter_seed, short_scenario, vehicle_seed
 from tanbench.config import Scenario
 from tanbench.filters import likelihood as lik
-from tanbench.filters.params import Likelihood
+from tanbench.filters.likelihood import Likelihood
 from tanbench.methods import run_method
 from tanbench.scoring import recovery_stats
 from tanbench.filters.state import E, N, N_TIGHT, PITCH, ROLL, U, YAW

@@ -192,11 +192,16 @@ def test_stop_now_with_half_a_result_in_the_pipe_exits(tmp_path):
 
 
 def worker_pids(pid: int) -> list[int]:
-    """The pool's worker processes of the CLI process ``pid`` (its spawned children, Linux /proc)."""
-    try:
-        children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
-    except OSError:
-        return []
+    """The pool's worker processes of the CLI process ``pid`` (its spawned children, Linux /proc).
+
+    Every thread's children: a Dask nanny starts its worker from the cluster's event-loop thread.
+    """
+    children = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            children += (task / "children").read_text().split()
+        except OSError:
+            pass
     found = []
     for child in children:
         try:
@@ -270,6 +275,28 @@ def test_workers_die_with_the_cli_however_it_dies(reference, tmp_path):
     again = cli(*args)
     assert again.returncode == 0, again.stderr
     assert_finished_like(out, ref_out)
+
+
+@needs_proc
+def test_local_dask_workers_die_with_the_cli(tmp_path):
+    """kill -9 of the CLI running a local Dask cluster: the cluster's worker processes end too."""
+    pytest.importorskip("distributed")
+    sweep = write_sweep(tmp_path / "resume.yaml", SWEEP)
+    out = tmp_path / "out"
+    proc = start_cli("run", sweep, "--out", out, "--scheduler", "local-dask", "--workers", 2, "-q")
+    wait_for_runs(proc, out, 1)
+    workers = worker_pids(proc.pid)
+    proc.kill()
+    proc.wait(timeout=30)
+    try:
+        assert workers, "no worker processes found"
+        assert gone(workers, timeout=20), "Dask worker processes outlived the CLI"
+    finally:
+        for pid in workers:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
 
 
 def test_the_resume_hint_is_a_command_that_works(reference, tmp_path):

@@ -181,7 +181,7 @@ def test_fast_runs_are_reproducible_in_a_spawned_worker(method):
 def test_systematic_resampling_draws_one_uniform():
     """Systematic resampling reads one uniform, the other schemes one per particle: the
     generator is advanced by exactly that."""
-    from tanbench.filters.params import Resampling
+    from tanbench.filters.resample import Resampling
     from tanbench.filters.resample import MULTINOMIAL, REG_NONE, SYSTEMATIC, resample_and_regularise
 
     m = 50

@@ -11,7 +11,7 @@ import pytest
 
 from tanbench.sensors.sonar import dvl_beam_vectors
 from tanbench.terrain.grid import Map
-from tanbench.terrain.suitability import (ping_information_grid, predicted_std, suitability, window_stats,
+from tanbench.suitability import (ping_information_grid, predicted_std, suitability, window_stats,
                                           window_stats_numpy, write_geotiff)
 
 SEED = 1515
@@ -79,7 +79,7 @@ def test_area_a_gives_more_information_than_area_b():
     from tanbench.config import Scenario
     from tanbench.simulation import motion_plan
     from tanbench.terrain import navigation_map
-    from tanbench.terrain.suitability import track_summary
+    from tanbench.suitability import track_summary
     from tanbench.vehicle.trajectory import sample_path
 
     sc = Scenario(area="A")

@@ -51,7 +51,11 @@ from functools import lru_cache
 import numpy as np
 import pandas as pd
 
+from tanbench.config import Scenario
 from tanbench.navigation.increments import D0E, D0N, JAXE, JAXN, JAZE, JAZN, SX, SZ, compute_increments
+from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
+from tanbench.simulation import noise_free_world
+from tanbench.terrain import navigation_map
 from tanbench.terrain.grid import Map
 from tanbench.terrain.stats import gradient
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -107,33 +111,20 @@ class BoundModel:
         return j
 
 
-def method_bound_spec(method: str) -> tuple[str, str] | None:
-    """(sensor, states) of a method's bound, from its registry record (None: no bound)."""
-    from tanbench.methods import get
-
-    return get(method).bound
-
-
 def model_for(scenario, states: str) -> BoundModel:
     """The bound model for ``states`` ("full": the tight filter's, "position": the loose one's) in ``scenario``."""
-    from tanbench.filters.propagate import position_noise
-    from tanbench.options import DISTANCE_INNOVATION
-    from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
-
     f = scenario.filter
-    T = scenario.sampling_time_s
-    q = f.process_noise_velocity_mps * T
     if states == "full":
-        sig_pos = position_noise(q, f.measurement_noise_distance_m, DISTANCE_INNOVATION[f.distance_innovation])
+        sig_pos = scenario.position_noise_m()
         cross = 0.0
     else:
-        sig_pos = q
-        cross = math.radians(f.initial_std_heading_deg) if f.loose_heading_noise else 0.0
+        sig_pos = scenario.position_step_m
+        cross = f.initial_std_heading_rad if f.loose_heading_noise else 0.0
     return BoundModel(
         states=states, initial_area_m=f.initial_area_m,
-        initial_std_heading_rad=math.radians(f.initial_std_heading_deg),
-        initial_std_bias_rad_s=f.initial_std_gyro_bias_deg_h * DEG_PER_H,
-        position_noise_m=sig_pos, heading_noise_rad=f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
+        initial_std_heading_rad=f.initial_std_heading_rad,
+        initial_std_bias_rad_s=f.initial_std_gyro_bias_rad_s,
+        position_noise_m=sig_pos, heading_noise_rad=scenario.attitude_noise_rad,
         cross_track_heading_rad=cross, range_std_m=scenario.noise_m / math.sqrt(3.0))
 
 
@@ -237,9 +228,6 @@ def true_tracks(scenario, sensor: str) -> tuple[list[TrueTrack], np.ndarray]:
     only (``noise_free_world``), so every run of a cell shares them: one track is the
     exact Monte Carlo average.
     """
-    from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
-    from tanbench.simulation import noise_free_world
-
     truth, ping_idx, dvl_true, sbe_true = noise_free_world(json.dumps(scenario.world_spec(), sort_keys=True))
     s = scenario.sensors
     if sensor == "dvl":
@@ -266,19 +254,16 @@ def bound_series(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, 
     return bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model_for(scenario, states)))
 
 
-def method_bound(scenario, method: str) -> pd.DataFrame | None:
-    """The PCRB series (t, ``BOUND_COLUMNS``) of ``method`` in ``scenario``; None if its record has no bound."""
-    spec = method_bound_spec(method)
-    if spec is None:
+def method_bound(scenario, bound: tuple[str, str] | None) -> pd.DataFrame | None:
+    """The PCRB series (t, ``BOUND_COLUMNS``) of a method in ``scenario``; ``bound`` is its
+    registry record's (sensor, states), handed down by the caller (None: no bound)."""
+    if bound is None:
         return None
-    return _bound_cached(json.dumps(scenario.normalized(), sort_keys=True), *spec).copy()
+    return _bound_cached(json.dumps(scenario.normalized(), sort_keys=True), *bound).copy()
 
 
 @lru_cache(maxsize=32)
 def _bound_cached(scenario_json: str, sensor: str, states: str) -> pd.DataFrame:
-    from tanbench.config import Scenario
-    from tanbench.terrain import navigation_map
-
     scenario = Scenario(**json.loads(scenario_json))
     tracks, beams = true_tracks(scenario, sensor)
     return bound_series(tracks, beams, navigation_map(scenario.terrain, scenario.map_resolution_m), scenario, states)

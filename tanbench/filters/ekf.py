@@ -27,11 +27,14 @@ terrain is far from linear over the prior; tanbench reports both regimes.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
-from tanbench.terrain.grid import bilinear, bilinear_numpy
+from tanbench.filters.beams import nav_frame_offsets
+from tanbench.navigation.increments import D0E, D0N, SZ
+from tanbench.terrain.grid import MapArgs, bilinear, bilinear_numpy
 
 NX = 4
 
@@ -202,9 +205,15 @@ def iekf_update_numpy(x, p, offsets_k, up, z, e0, n0, inv_re, inv_rn, res, sig_u
 
 
 @nb.njit(cache=True)
-def ekf_loop(x, p, inc_d0, inc_sz, offsets, nav_up, z, e0, n0, inv_re, inv_rn,
-             q_pos, q_delta, q_bias, sig_u, iterations, gate, est, var, rejected):
-    """Run the IEKF; fills ``est``/``var`` (K, 4) and ``rejected`` (K,) (1 = update gated out)."""
+def ekf_loop(x, p, inc_d0, inc_sz, offsets, nav_up, zmap, settings, out):
+    """Run the IEKF from the state ``x`` and covariance ``p`` along the increments (``inc_d0``
+    (K-1, 2), ``inc_sz`` (K-1,)); ``zmap`` the map's ``MapArgs``; ``settings`` an
+    :class:`EkfSettings`; fills ``out`` (:class:`EkfOutputs`): ``est``/``var`` (K, 4) and
+    ``rejected`` (K,) (1 = update gated out)."""
+    z, e0, n0, inv_re, inv_rn = zmap
+    q_pos, q_delta, q_bias, sig_u, iterations, gate = settings.q_pos, settings.q_delta, settings.q_bias, \
+        settings.sig_u, settings.iterations, settings.gate
+    est, var, rejected = out
     steps = offsets.shape[0]
     res = 1.0 / min(inv_re, inv_rn)
     for k in range(steps):
@@ -218,31 +227,40 @@ def ekf_loop(x, p, inc_d0, inc_sz, offsets, nav_up, z, e0, n0, inv_re, inv_rn,
             var[k, c] = p[c, c]
 
 
-def run_ekf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, inc, beams, ranges, zargs, rng=None, *,
-            initial_area_m=150.0, initial_std_heading_deg=30.0, initial_std_gyro_bias_deg_h=25.0,
-            sig_pos=0.07, heading_drift_deg_sqrt_s=0.03, sampling_time_s=1.0, sig_u=1.0,
-            iterations=3, gate=18.5) -> dict:
-    """IEKF on plain arrays; ``inc`` is the (K-1, 12) increments table. Deterministic (``rng`` unused).
+# the IEKF's settings: the prior (initial square's side, heading std, z-gyro bias std), the
+# process noise variances per update (position, heading offset, bias), altitude std, the
+# Gauss-Newton passes per update and the NIS gate; and its outputs
+EkfSettings = namedtuple("EkfSettings", "initial_area_m std_heading std_bias q_pos q_delta q_bias sig_u iterations gate")
+EkfOutputs = namedtuple("EkfOutputs", "est var rejected")
+
+
+def ekf_settings(scenario, options) -> EkfSettings:
+    """The IEKF's settings from the scenario and the method's options (``methods/ekf.py:EkfOptions``)."""
+    f = scenario.filter
+    return EkfSettings(f.initial_area_m, f.initial_std_heading_rad, f.initial_std_gyro_bias_rad_s,
+                       scenario.position_noise_m()**2,
+                       math.radians(options.heading_drift_deg_sqrt_s) ** 2 * scenario.sampling_time_s, 0.0,
+                       f.measurement_noise_altitude_m, int(options.iterations), float(options.gate))
+
+
+def run_ekf(nav, inc, beams, ranges, zargs, settings: EkfSettings) -> dict:
+    """IEKF on plain arrays: ``nav`` the navigation at the updates
+    (:class:`~tanbench.navigation.increments.NavAtUpdates`), ``inc`` the (K-1, 12) increments
+    table, beams, ranges, the map's kernel args. Deterministic.
 
     The initial position is the navigation position with the variance of the particle
     filters' uniform initial square (side^2 / 12).
     """
-    from tanbench.filters.beams import nav_frame_offsets
-    from tanbench.navigation.increments import D0E, D0N, SZ
-    from tanbench.sensors.imu import DEG_PER_H
-
-    offsets = nav_frame_offsets(nav_pitch, nav_roll, nav_yaw, beams, ranges)
+    offsets = nav_frame_offsets(nav.pitch, nav.roll, nav.yaw, beams, ranges)
     k_steps = offsets.shape[0]
-    x = np.array([nav_en[0, 0], nav_en[0, 1], 0.0, 0.0])
-    p = np.diag([initial_area_m**2 / 12.0, initial_area_m**2 / 12.0, math.radians(initial_std_heading_deg) ** 2,
-                 (initial_std_gyro_bias_deg_h * DEG_PER_H) ** 2])
+    x = np.array([nav.en[0, 0], nav.en[0, 1], 0.0, 0.0])
+    s = settings
+    p = np.diag([s.initial_area_m**2 / 12.0, s.initial_area_m**2 / 12.0, s.std_heading ** 2, s.std_bias ** 2])
     est = np.empty((k_steps, NX))
     var = np.empty((k_steps, NX))
     rejected = np.zeros(k_steps, dtype=np.int64)
-    q_delta = math.radians(heading_drift_deg_sqrt_s) ** 2 * sampling_time_s
     ekf_loop(x, p, np.ascontiguousarray(inc[:, [D0E, D0N]]), np.ascontiguousarray(inc[:, SZ]), offsets,
-             np.ascontiguousarray(nav_up, dtype=float), *zargs, sig_pos**2, q_delta, 0.0, sig_u,
-             int(iterations), float(gate), est, var, rejected)
-    return {"est_e": est[:, 0], "est_n": est[:, 1], "est_yaw": np.asarray(nav_yaw) + est[:, 2],
+             np.ascontiguousarray(nav.up, dtype=float), MapArgs(*zargs), settings, EkfOutputs(est, var, rejected))
+    return {"est_e": est[:, 0], "est_n": est[:, 1], "est_yaw": np.asarray(nav.yaw) + est[:, 2],
             "var_e": var[:, 0], "var_n": var[:, 1], "var_yaw": var[:, 2],
             "bias_z": est[:, 3], "var_bias_z": var[:, 3], "rejected": rejected}

@@ -42,10 +42,38 @@ from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference, attitude_sin_cos
 from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
-from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell
+from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell, node_grid
+from tanbench.terrain.representation import map_variance_grid
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 LIK_GAUSSIAN, LIK_STUDENT = LIKELIHOOD["gaussian"], LIKELIHOOD["student-t"]
+
+# measurement model: the map-aware density (``mapaware``: the beam variance includes the map's
+# variance grid, whose coefficients then follow the map's in the loop's cell table,
+# terrain.grid.cell_grid), the beam density code (``kind``, options.LIKELIHOOD) and the
+# Student-t degrees of freedom ``nu``
+Likelihood = namedtuple("Likelihood", "mapaware kind nu")
+
+
+def likelihood_of(f) -> Likelihood:
+    """The :class:`Likelihood` bundle of a ``FilterSpec`` ``f``: the map-aware density when the
+    map-aware variance or a non-Gaussian density is asked for."""
+    mapaware = f.map_aware_likelihood or f.likelihood != "gaussian"
+    return Likelihood(bool(mapaware), LIKELIHOOD[f.likelihood], float(f.student_nu))
+
+
+def likelihood_grid(f, nmap):
+    """The navigation map as the particle filters read it (:class:`~tanbench.terrain.grid.NodeGrid`):
+    with the map-aware density, its variance grid interleaved with its heights: the map's
+    representation variance with its declared error (``filter.map_aware_likelihood``,
+    terrain/representation.py), or zero."""
+    if not likelihood_of(f).mapaware:
+        return node_grid(nmap)
+    if f.map_aware_likelihood:
+        mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    else:
+        mvar = np.where(np.isnan(nmap.z), np.nan, 0.0)
+    return node_grid(nmap, mvar)
 FOLD_BEAMS = 8
 
 # the work arrays of the likelihood passes for one block of the cloud: the filter loops run
@@ -291,7 +319,7 @@ def loglik_tight(x, beams, ranges, grid, lik, sig_u, outside_sigma, dist_innov, 
     """Fill ``out`` (M,) with each particle's log-likelihood (``x`` (8, M)); return the best chi^2
     per beam. ``grid`` is the map's :class:`~tanbench.terrain.grid.NodeGrid` (with the
     variance grid interleaved for the map-aware density), ``lik`` a
-    :class:`~tanbench.filters.params.Likelihood`; ``dist_innov`` (2, M) enters if
+    :class:`Likelihood`; ``dist_innov`` (2, M) enters if
     ``with_dist``. ``ref_*`` (the navigation attitude) only centre the trigonometry."""
     su2, inv_d2, out2 = beam_constants(sig_u, sig_d, outside_sigma)
     m = x.shape[1]

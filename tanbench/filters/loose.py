@@ -20,22 +20,47 @@ filter.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
 from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (BLOCK, beam_constants, loglik_loose_pass, new_likelihood_work, used_offsets,
+from tanbench.filters.likelihood import (BLOCK, Likelihood, beam_constants, loglik_loose_pass, new_likelihood_work, used_offsets,
                                         work_block)
 from tanbench.filters.propagate import DIST_NONE, propagate_loose, propagate_tight
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
-from tanbench.filters.params import Likelihood
 from tanbench.filters.tight import keep_on_map
 from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
 from tanbench.navigation.increments import JAZE, JAZN, SZ
+
+# position process noise, heading-induced cross-track noise, altitude std, off-map innovation,
+# and the horizontal std below which the filter's estimate is a position fix
+LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma converged_std")
+
+# the closed-loop loose TAN's navigation KF (navigation/eskf.py): process noise std per update
+# (position, heading, z-gyro bias), a fix every ``fix_every`` updates, chi-square gate, std added
+# to a fix, the weakest terrain-only fix used, and the gate rejections in a row after which the
+# KF is reopened
+LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses")
+
+# the fix-only loop: the navigation at the K updates (displacements (K-1, 2), position (K, 2),
+# up (K,)), its settings (``half_side``: the initial square's) and what it fills: the
+# fix-corrected position (K, 2), the cloud's east/north variances (K, 2) and covariance,
+# ESS, reinitialisations and fixes (K,)
+FixOnlyTrack = namedtuple("FixOnlyTrack", "d0 en up")
+FixOnlySettings = namedtuple("FixOnlySettings", "model rs div half_side readings")
+FixOnlyOutputs = namedtuple("FixOnlyOutputs", "en var cov_en ess reinit fixed")
+
+# the closed loop: the navigation at the updates (increments (K-1, 12), yaw, up (K,)), its
+# settings and what it fills (position (K, 2), yaw, z-gyro bias, variances (K, 2), yaw
+# variance, ESS, reinitialisations, accepted and rejected fixes, health (K,))
+KalmanTrack = namedtuple("KalmanTrack", "inc yaw up")
+KalmanSettings = namedtuple("KalmanSettings", "model rs div half_side lik guard kf")
+KalmanOutputs = namedtuple("KalmanOutputs", "en yaw bias var var_yaw ess reinit fixed rejected healthy")
 
 LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states (rows) the regularisation jitters
 
@@ -62,17 +87,18 @@ def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading,
 
 
 @nb.njit(cache=True)
-def loose_filter_loop(x, rng, d0, nav_en, nav_up, offsets, grid, model, rs, div, half_side, readings,
-                      out_en, var, cov_en_out, ess_out, reinit_out, fixed_out):
-    """Run the loose filter; ``out_en`` (K+1, 2) is the fix-corrected navigation position.
-
-    ``var`` (K+1, 2) and ``cov_en_out`` (K+1,) are the cloud's east/north (co)variances.
+def loose_filter_loop(x, rng, track, offsets, grid, settings, out):
+    """Run the loose filter along ``track`` (:class:`FixOnlyTrack`); fill ``out``
+    (:class:`FixOnlyOutputs`), whose ``en`` is the fix-corrected navigation position.
 
     ``x`` (2, M) is the initial cloud, a column per particle; ``grid`` the navigation map's
-    :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div`` and ``readings`` are the bundles of
-    :mod:`tanbench.filters.params` (LooseModel, Resampling, Divergence, Readings;
+    :class:`~tanbench.terrain.grid.NodeGrid`; ``settings`` the :class:`FixOnlySettings`
+    (LooseModel above, Resampling, Divergence, Readings of :mod:`tanbench.filters.tight`;
     of the readings the loose filter uses ``cloud_std``, ``div_reinit`` and ``collapse_spread``).
     """
+    d0, nav_en, nav_up = track
+    model, rs, div, half_side, readings = settings
+    out_en, var, cov_en_out, ess_out, reinit_out, fixed_out = out
     m = x.shape[1]
     steps = offsets.shape[0]
     logw = np.zeros(m)
@@ -175,9 +201,7 @@ def _open_window(m_prior, p_prior, centre_e, centre_n, half_side):
 # Closed-loop loose TAN ("kalman-feedback", the recommended architecture)
 # --------------------------------------------------------------------------------------
 @nb.njit(cache=True)
-def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, grid, model, rs, div, half_side, lik, guard,
-                      kf, p_kf, out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out,
-                      rejected_out, healthy_out):
+def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
     """Position PF -> fixes -> error-state KF of the navigation system -> corrected navigation,
     which drives the PF (docs/model.md, Section 6.2).
 
@@ -192,11 +216,14 @@ def loose_kalman_loop(x, rng, inc, nav_yaw, nav_up, offsets, grid, model, rs, di
     initial covariance, updated in place; ``out_en[0]`` holds the start position.
 
     ``x`` (2, M) is the initial cloud; ``grid`` the navigation map's
-    :class:`~tanbench.terrain.grid.NodeGrid`; ``model``, ``rs``, ``div``, ``lik``, ``guard`` and ``kf`` are the
-    bundles of :mod:`tanbench.filters.params` (LooseModel, Resampling, Divergence,
-    Likelihood, Guard, LooseKalman); ``model.sig_heading`` is not used (the KF's heading
-    std replaces it).
+    :class:`~tanbench.terrain.grid.NodeGrid`; ``track`` the :class:`KalmanTrack`; ``settings``
+    the :class:`KalmanSettings` (LooseModel, LooseKalman above; Resampling, Divergence,
+    Likelihood, Guard); ``model.sig_heading`` is not used (the KF's heading std replaces
+    it); ``out`` the :class:`KalmanOutputs` it fills.
     """
+    inc, nav_yaw, nav_up = track
+    model, rs, div, half_side, lik, guard, kf = settings
+    out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out, rejected_out, healthy_out = out
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]

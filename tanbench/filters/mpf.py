@@ -33,17 +33,22 @@ could differ by an ulp between processes.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
+from tanbench.filters.beams import nav_frame_offsets
 from tanbench.filters.cloud import uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.resample import effective_sample_size, normalize_log_weights, resample_and_regularise
+from tanbench.filters.resample import (effective_sample_size, normalize_log_weights, resample_and_regularise,
+                                      resampling_of)
 from tanbench.filters.rng import fill_normals
+from tanbench.filters.tight import divergence_of
 from tanbench.filters.trig import sin_cos
 from tanbench.navigation.increments import D0E, D0N, DYAW, JAZE, JAZN, SZ
-from tanbench.terrain.grid import bilinear, bilinear_numpy
+from tanbench.terrain.grid import MapArgs, bilinear, bilinear_numpy
+from tanbench.units import DEG_PER_H
 
 E, N, PSI, B, PB, EPS, PEPS = range(7)
 N_MPF = 7
@@ -180,14 +185,19 @@ def init_mpf(x, rng, centre_e, centre_n, yaw, half_side, std_yaw, var_b, var_eps
 
 
 @nb.njit(cache=True)
-def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps, q_b, sig_u, outside_sigma,
-             rs, div, half_side, std_yaw, var_b, var_eps, est, var, ess_out, reinit_out):
-    """Run the MPF over K updates; ``est``/``var`` (K, 7): particle means/variances of the columns.
+def mpf_loop(x, rng, track, offsets, zmap, settings, out):
+    """Run the MPF over K updates; fill ``out`` (:class:`MpfOutputs`: est/var (K, 7), the
+    particle means/variances of the columns, ESS and reinitialisations).
 
-    ``x`` (7, M) is the initial cloud, a column per particle; ``zmap`` is the map's ``MapArgs``,
-    ``rs`` a ``Resampling`` bundle (its ``cols``: E, N, psi),
-    ``div`` a ``Divergence`` bundle (``tanbench.filters.params``).
+    ``x`` (7, M) is the initial cloud, a column per particle; ``track`` the increments
+    (K-1, 12), yaw and up (K,) of the navigation at the updates (:class:`MpfTrack`); ``zmap``
+    is the map's ``MapArgs``; ``settings`` the :class:`MpfSettings` (its ``rs``' ``cols``: E, N, psi).
     """
+    inc, nav_yaw, nav_up = track
+    _, model, prior, rs, div = settings
+    sig_pos, q_psi, q_eps, q_b, sig_u, outside_sigma = model
+    half_side, std_yaw, var_b, var_eps = prior
+    est, var, ess_out, reinit_out = out
     z, e0, n0, inv_re, inv_rn = zmap
     div_sigma, div_steps = div
     m = x.shape[1]
@@ -229,42 +239,44 @@ def mpf_loop(x, rng, inc, nav_yaw, nav_up, offsets, zmap, sig_pos, q_psi, q_eps,
         resample_and_regularise(x, w, logw, ess, rng, rs, 3, math.sqrt(v[E] + v[N]), uni, idx, scratch)
 
 
-def run_mpf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, inc, beams, ranges, zargs, rng, *,
-            particles=1000, initial_area_m=150.0, initial_std_heading_deg=30.0, initial_std_gyro_bias_deg_h=25.0,
-            initial_std_depth_bias_m=2.0, sig_pos=0.07, sig_att_step=None, sampling_time_s=1.0,
-            gyro_bias_corr_time_s=300.0, gyro_bias_instability_deg_h=25.0, depth_bias_walk_m_sqrt_s=0.001,
-            sig_u=1.0, outside_sigma=5.0, resampling=None, divergence=(4.0, 10)) -> dict:
-    """MPF on plain arrays; ``inc`` (K-1, 12) increments; ``rng`` the run's Generator.
+# the MPF's bundles: process noise (position std, heading, gyro-bias and depth-bias variances per
+# update), altitude std and off-map innovation; the prior (initial square's half side, heading
+# std, depth-bias and gyro-bias variances); all settings; the navigation at the updates; outputs
+MpfModel = namedtuple("MpfModel", "sig_pos q_psi q_eps q_b sig_u outside_sigma")
+MpfPrior = namedtuple("MpfPrior", "half_side std_yaw var_b var_eps")
+MpfSettings = namedtuple("MpfSettings", "particles model prior rs div")
+MpfTrack = namedtuple("MpfTrack", "inc yaw up")
+MpfOutputs = namedtuple("MpfOutputs", "est var ess reinit")
 
-    ``resampling`` is a ``Resampling`` bundle (default: systematic at ESS < M/2, Liu-West
-    h = 0.1 on E, N, psi, 2 m minimum spread), ``divergence`` (sigma, steps).
-    """
-    from tanbench.filters.beams import nav_frame_offsets
-    from tanbench.filters.params import Divergence, MapArgs, Resampling
-    from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
 
-    if resampling is None:
-        resampling = Resampling(0, 0.5, 1, REG_COLS, 0.1, 2.0)
-    offsets = nav_frame_offsets(nav_pitch, nav_roll, nav_yaw, beams, ranges)
+def mpf_settings(scenario, options) -> MpfSettings:
+    """The MPF's settings from the scenario and the method's options (``methods/mpf.py:MpfOptions``)."""
+    f, s, T = scenario.filter, scenario.sensors, scenario.sampling_time_s
+    q_eps = 2.0 * (s.gyro_bias_instability_deg_h * DEG_PER_H) ** 2 * T / s.gyro_bias_corr_time_s
+    model = MpfModel(scenario.position_noise_m(), scenario.attitude_noise_rad**2, q_eps,
+                     options.depth_bias_walk_m_sqrt_s**2 * T, f.measurement_noise_altitude_m, f.outside_map_sigma)
+    prior = MpfPrior(f.initial_area_m / 2.0, f.initial_std_heading_rad, options.initial_std_depth_bias_m**2,
+                     f.initial_std_gyro_bias_rad_s**2)
+    return MpfSettings(scenario.particles, model, prior, resampling_of(f, REG_COLS), divergence_of(f))
+
+
+def run_mpf(nav, inc, beams, ranges, zargs, rng, settings: MpfSettings) -> dict:
+    """MPF on plain arrays: ``nav`` the navigation at the updates
+    (:class:`~tanbench.navigation.increments.NavAtUpdates`), ``inc`` (K-1, 12) increments, the
+    beams and their ranges, the map's ``MapArgs`` ``zargs``, ``rng`` the run's Generator."""
+    offsets = nav_frame_offsets(nav.pitch, nav.roll, nav.yaw, beams, ranges)
     k_steps = offsets.shape[0]
-    if sig_att_step is None:
-        sig_att_step = 2.0 * DEG_PER_SQRT_H * math.sqrt(sampling_time_s)
-    q_eps = 2.0 * (gyro_bias_instability_deg_h * DEG_PER_H) ** 2 * sampling_time_s / gyro_bias_corr_time_s
-    x = np.empty((N_MPF, particles))  # a column per particle
-    std_yaw = math.radians(initial_std_heading_deg)
-    var_b = initial_std_depth_bias_m**2
-    var_eps = (initial_std_gyro_bias_deg_h * DEG_PER_H) ** 2
-    nav_en = np.asarray(nav_en, dtype=float)
-    nav_yaw = np.ascontiguousarray(nav_yaw, dtype=float)
-    init_mpf(x, rng, nav_en[0, 0], nav_en[0, 1], nav_yaw[0], initial_area_m / 2.0, std_yaw, var_b, var_eps)
+    x = np.empty((N_MPF, settings.particles))  # a column per particle
+    nav_en = np.asarray(nav.en, dtype=float)
+    nav_yaw = np.ascontiguousarray(nav.yaw, dtype=float)
+    p = settings.prior
+    init_mpf(x, rng, nav_en[0, 0], nav_en[0, 1], nav_yaw[0], p.half_side, p.std_yaw, p.var_b, p.var_eps)
     est = np.empty((k_steps, N_MPF))
     var = np.empty((k_steps, N_MPF))
     ess = np.empty(k_steps)
     reinit = np.zeros(k_steps, dtype=np.int64)
-    mpf_loop(x, rng, np.ascontiguousarray(inc), nav_yaw, np.ascontiguousarray(nav_up, dtype=float), offsets,
-             MapArgs(*zargs), sig_pos, sig_att_step**2, q_eps, depth_bias_walk_m_sqrt_s**2 * sampling_time_s, sig_u,
-             outside_sigma, resampling, Divergence(*divergence), initial_area_m / 2.0, std_yaw, var_b, var_eps,
-             est, var, ess, reinit)
+    mpf_loop(x, rng, MpfTrack(np.ascontiguousarray(inc), nav_yaw, np.ascontiguousarray(nav.up, dtype=float)), offsets,
+             MapArgs(*zargs), settings, MpfOutputs(est, var, ess, reinit))
     return {"est_e": est[:, E], "est_n": est[:, N], "est_yaw": est[:, PSI],
             "var_e": var[:, E], "var_n": var[:, N], "var_yaw": var[:, PSI],
             "depth_bias_m": est[:, B], "var_depth_bias": est[:, PB] + var[:, B],

@@ -36,12 +36,15 @@ initial cloud; the heading prior N(0, sigma_psi^2) weights the slices.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
-from tanbench.filters.likelihood import loglik_loose
-from tanbench.filters.params import Likelihood
+from tanbench.filters.beams import nav_frame_offsets
+from tanbench.filters.likelihood import Likelihood, loglik_loose
+from tanbench.terrain.grid import node_grid_of
+from tanbench.terrain.grid import bilinear_numpy
 
 DEAD_MASS = 1e-12
 
@@ -134,7 +137,6 @@ def resample_grid(p, ce, cn, s, ce_new, cn_new, s_new, out):
 
 
 def resample_grid_numpy(p, ce, cn, s, ce_new, cn_new, s_new):
-    from tanbench.terrain.grid import bilinear_numpy
 
     n = p.shape[0]
     c = 0.5 * (n - 1)
@@ -225,22 +227,24 @@ def pmf_init(p, centres, deltas, centre_e, centre_n, sig_heading0):
 
 
 @nb.njit(cache=True)
-def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, grid,
-             n, deltas, sig_heading0, half_side, sig_pos, sig_cross, sig_heading_step, s_min,
-             sig_u, outside_sigma, div_sigma, div_steps,
-             est, var, reinit_out, live_out):
+def pmf_loop(track, offsets, grid, settings, out):
     """Run the PMF over all K updates.
 
-    ``nav_en`` (K, 2), ``nav_up`` (K,), ``nav_yaw`` (K,): navigation solution at the updates;
-    ``d0`` (K-1, 2): its displacements; ``offsets`` (K, m, 3): beam vectors times ranges in
+    ``track`` (:class:`PmfTrack`): ``en`` (K, 2), ``up`` (K,), ``yaw`` (K,), the navigation
+    solution at the updates, and ``d0`` (K-1, 2) its displacements; ``settings`` the
+    :class:`PmfSettings` (``n`` cells per side, ``div_sigma``, ``div_steps``, and those below); ``offsets`` (K, m, 3): beam vectors times ranges in
     the navigation frame with the navigation attitude (NaN = no range); ``grid`` the navigation
     map as the likelihood reads it (``terrain.grid.NodeGrid``). ``deltas`` (H,) heading
     offsets (rad); ``sig_pos`` position noise per update (m); ``sig_cross`` cross-track noise
     per metre travelled (rad: the heading uncertainty inside one slice);
     ``sig_heading_step`` heading random walk per update (rad).
-    Fills ``est`` (K, 3) east, north, yaw; ``var`` (K, 3); ``reinit_out`` and ``live_out``
-    (K,) (slices evaluated at each update: the cost driver).
+    Fills ``out`` (:class:`PmfOutputs`): ``est`` (K, 3) east, north, yaw; ``var`` (K, 3);
+    ``reinit`` and ``live`` (K,) (slices evaluated at each update: the cost driver).
     """
+    nav_en, nav_up, nav_yaw, d0 = track
+    (n, deltas, sig_heading0, half_side, sig_pos, sig_cross, sig_heading_step, s_min, sig_u, outside_sigma,
+     div_sigma, div_steps) = settings
+    est, var, reinit_out, live_out = out
     h = deltas.shape[0]
     steps = nav_en.shape[0]
     m_beams = offsets.shape[1]
@@ -372,42 +376,52 @@ def pmf_loop(nav_en, nav_up, nav_yaw, d0, offsets, grid,
         s = new_s
 
 
-def run_pmf(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, beams, ranges, zargs, rng=None, *,
-            cells=32, headings=15, heading_span_deg=60.0, initial_area_m=150.0,
-            initial_std_heading_deg=30.0, sig_pos=0.07, heading_drift_deg_sqrt_s=0.25,
-            sampling_time_s=1.0, min_spacing_m=0.5, sig_u=1.0, outside_sigma=5.0,
-            div_sigma=4.0, div_steps=10) -> dict:
-    """Point-mass filter on plain arrays (navigation solution at the K updates, beams (m, 3),
-    ranges (K, m), the navigation map's ``kernel_args()``). Deterministic: ``rng`` is unused.
+# the PMF's settings (``pmf_loop``'s docstring), the navigation at the updates and its outputs
+PmfSettings = namedtuple("PmfSettings", "n deltas sig_heading0 half_side sig_pos sig_cross sig_heading_step s_min "
+                                        "sig_u outside_sigma div_sigma div_steps")
+PmfTrack = namedtuple("PmfTrack", "en up yaw d0")
+PmfOutputs = namedtuple("PmfOutputs", "est var reinit live")
 
-    ``headings`` = 1 is the position-only filter (heading prior as cross-track noise).
-    Returns per-update east, north, yaw estimates and their variances, reinitialisations
-    and the number of slices evaluated.
-    """
-    from tanbench.filters.beams import nav_frame_offsets
-    from tanbench.terrain.grid import node_grid_of
 
-    nav_en = np.ascontiguousarray(nav_en, dtype=float)
-    k_steps = nav_en.shape[0]
-    offsets = nav_frame_offsets(nav_pitch, nav_roll, nav_yaw, beams, ranges)
-    d0 = np.ascontiguousarray(np.diff(nav_en, axis=0))
-    sig0 = math.radians(initial_std_heading_deg)
-    if headings > 1:
+def pmf_settings(scenario, options) -> PmfSettings:
+    """The PMF's settings from the scenario and the method's options (``methods/pmf.py:PmfOptions``).
+
+    ``options.headings`` = 1 is the position-only filter (heading prior as cross-track noise)."""
+    f = scenario.filter
+    sig0 = f.initial_std_heading_rad
+    if options.headings > 1:
         # the bank spans the heading prior (2.5 sigma), at most heading_span_deg
-        span = min(math.radians(heading_span_deg), 2.5 * sig0) if sig0 > 0 else math.radians(heading_span_deg)
-        deltas = np.linspace(-span, span, headings)
+        span = min(math.radians(options.heading_span_deg), 2.5 * sig0) if sig0 > 0 else \
+            math.radians(options.heading_span_deg)
+        deltas = np.linspace(-span, span, options.headings)
         sig_cross = (deltas[1] - deltas[0]) / math.sqrt(12.0)
     else:
         deltas = np.zeros(1)
         sig_cross = sig0
+    return PmfSettings(int(options.cells), deltas, sig0, f.initial_area_m / 2.0, scenario.position_noise_m(), sig_cross,
+                       math.radians(options.heading_drift_deg_sqrt_s) * math.sqrt(scenario.sampling_time_s),
+                       options.min_spacing_m, f.measurement_noise_altitude_m, f.outside_map_sigma, f.divergence_sigma,
+                       f.divergence_steps)
+
+
+def run_pmf(nav, beams, ranges, zargs, settings: PmfSettings) -> dict:
+    """Point-mass filter on plain arrays (``nav`` the navigation solution at the K updates,
+    :class:`~tanbench.navigation.increments.NavAtUpdates`; beams (m, 3), ranges (K, m), the
+    navigation map's ``kernel_args()``). Deterministic.
+
+    Returns per-update east, north, yaw estimates and their variances, reinitialisations
+    and the number of slices evaluated.
+    """
+    nav_en = np.ascontiguousarray(nav.en, dtype=float)
+    k_steps = nav_en.shape[0]
+    offsets = nav_frame_offsets(nav.pitch, nav.roll, nav.yaw, beams, ranges)
+    d0 = np.ascontiguousarray(np.diff(nav_en, axis=0))
     est = np.empty((k_steps, 3))
     var = np.empty((k_steps, 3))
     reinit = np.zeros(k_steps, dtype=np.int64)
     live = np.zeros(k_steps, dtype=np.int64)
-    pmf_loop(nav_en, np.ascontiguousarray(nav_up, dtype=float), np.ascontiguousarray(nav_yaw, dtype=float),
-             d0, offsets, node_grid_of(*zargs), int(cells), deltas, sig0, initial_area_m / 2.0, sig_pos, sig_cross,
-             math.radians(heading_drift_deg_sqrt_s) * math.sqrt(sampling_time_s), min_spacing_m,
-             sig_u, outside_sigma, div_sigma, div_steps, est, var, reinit, live)
+    track = PmfTrack(nav_en, np.ascontiguousarray(nav.up, dtype=float), np.ascontiguousarray(nav.yaw, dtype=float), d0)
+    pmf_loop(track, offsets, node_grid_of(*zargs), settings, PmfOutputs(est, var, reinit, live))
     return {"est_e": est[:, 0], "est_n": est[:, 1], "est_yaw": est[:, 2],
             "var_e": var[:, 0], "var_n": var[:, 1], "var_yaw": var[:, 2],
             "reinit": reinit, "live_slices": live}

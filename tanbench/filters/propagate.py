@@ -209,11 +209,3 @@ def propagate_loose_numpy(x, d0e, d0n, noise, sig_pos, sig_heading):
     """Plain-numpy reference of :func:`propagate_loose`."""
     h = sig_heading * noise[2]
     return x + np.array([[d0e], [d0n]]) + sig_pos * noise[:2] + h * np.array([[-d0n], [d0e]])
-
-
-def position_noise(q: float, r: float, dist_mode: int) -> float:
-    """East/north noise per update: Table 2's q, or q combined with the distance noise r."""
-    if dist_mode == DIST_PARTICLE:
-        return q * r / math.sqrt(q * q + r * r)
-    return q
-

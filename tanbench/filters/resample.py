@@ -32,6 +32,7 @@ in the states with zero or tiny process noise (gyro biases, heading):
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
@@ -40,6 +41,17 @@ from tanbench.filters import FASTMATH
 from tanbench.filters.rng import fill_normals, fill_uniforms
 from tanbench.filters.vecmath import exp_nonpositive, log_positive
 from tanbench.options import REGULARISATION, RESAMPLING
+
+# resampling when ESS < ess_threshold * M, then regularisation of ``cols`` with kernel
+# ``kind`` of size ``size``; a horizontal cloud below ``min_spread`` m std is re-spread
+Resampling = namedtuple("Resampling", "scheme ess_threshold kind cols size min_spread")
+
+
+def resampling_of(f, regularised_cols: np.ndarray) -> Resampling:
+    """The :class:`Resampling` bundle of a ``FilterSpec`` ``f`` (its regularised state rows ``regularised_cols``)."""
+    size = f.roughening if f.regularisation == "gordon" else f.regularisation_h
+    return Resampling(RESAMPLING[f.resampling], f.ess_threshold, REGULARISATION[f.regularisation],
+                      regularised_cols, size, f.min_spread_m)
 
 SYSTEMATIC, MULTINOMIAL, STRATIFIED, RESIDUAL = (RESAMPLING[k] for k in ("systematic", "multinomial",
                                                                          "stratified", "residual"))
@@ -356,7 +368,7 @@ def resample_and_regularise(x, w, logw, ess, rng, rs, dim, spread, uni, idx, scr
     below ``rs.ess_threshold * M`` resample (drawing one uniform for the systematic scheme, M
     for the others), regularise rows ``rs.cols`` and, if the horizontal cloud (rows 0 and 1,
     std ``spread``) has collapsed below ``rs.min_spread``, re-spread it. ``rs`` is a
-    :class:`tanbench.filters.params.Resampling`."""
+    :class:`Resampling`."""
     m = x.shape[1]
     _shift_log_weights(logw)
     if ess >= rs.ess_threshold * m:

@@ -27,11 +27,13 @@ the whole track since the fix about the fix's position).
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
-from tanbench.terrain.grid import bilinear, bilinear_numpy
+from tanbench.filters.beams import nav_frame_offsets
+from tanbench.terrain.grid import MapArgs, bilinear, bilinear_numpy
 
 MSD, MAD = 0, 1
 METRICS = {"msd": MSD, "mad": MAD}
@@ -176,11 +178,15 @@ def _collect(buf_e, buf_n, buf_h, count, pe, pn, ph):
 
 
 @nb.njit(cache=True)
-def tercom_loop(d0, offsets, nav_up, start_e, start_n, z, e0, n0, inv_re, inv_rn,
-                profile_len, interval, metric, headings, window_max, fix_std, var0_pos, var0_heading,
-                q_pos, q_heading, sig_u, div_sigma, est, var, fixes):
-    """Run TERCOM over K updates; fills ``est`` (K, 3) (east, north, heading correction), ``var`` (K, 3),
+def tercom_loop(d0, offsets, nav_up, start_e, start_n, zmap, settings, out):
+    """Run TERCOM over K updates from the navigation's displacements ``d0`` (K-1, 2), up (K,) and
+    start; ``zmap`` the map's ``MapArgs``; ``settings`` a :class:`TercomSettings`; fills ``out``
+    (:class:`TercomOutputs`): ``est`` (K, 3) (east, north, heading correction), ``var`` (K, 3),
     ``fixes`` (K,) (1 where a fix was accepted)."""
+    z, e0, n0, inv_re, inv_rn = zmap
+    (profile_len, interval, metric, headings, window_max, fix_std, var0_pos, var0_heading, q_pos, q_heading, sig_u,
+     div_sigma) = settings
+    est, var, fixes = out
     steps = offsets.shape[0]
     m = offsets.shape[1]
     res = 1.0 / min(inv_re, inv_rn)
@@ -297,27 +303,38 @@ def tercom_loop(d0, offsets, nav_up, start_e, start_n, z, e0, n0, inv_re, inv_rn
         var[k, 2] = p_head
 
 
-def run_tercom(nav_en, nav_up, nav_pitch, nav_roll, nav_yaw, beams, ranges, zargs, rng=None, *,
-               profile_len=30, interval=10, metric="msd", headings=9, window_max_m=150.0, fix_std_m=10.0,
-               initial_area_m=150.0, initial_std_heading_deg=30.0, sig_pos=0.07,
-               heading_drift_deg_sqrt_s=0.03, sampling_time_s=1.0, sig_u=1.0, div_sigma=4.0) -> dict:
-    """TERCOM on plain arrays (navigation solution at the K updates, beams, ranges, map kernel args).
+# TERCOM's settings (profile length and match interval in updates, metric code, heading candidates,
+# largest window half-width, fix std threshold, initial position and heading variances, their
+# process noise per update, altitude std, divergence sigma) and its outputs
+TercomSettings = namedtuple("TercomSettings", "profile_len interval metric headings window_max fix_std var0_pos "
+                                              "var0_heading q_pos q_heading sig_u div_sigma")
+TercomOutputs = namedtuple("TercomOutputs", "est var fixes")
 
-    Deterministic (``rng`` unused). Returns the corrected navigation solution per update,
-    its variances and where fixes were taken.
+
+def tercom_settings(scenario, options) -> TercomSettings:
+    """TERCOM's settings from the scenario and the method's options (``methods/tercom.py:TercomOptions``)."""
+    f = scenario.filter
+    return TercomSettings(int(options.profile_pings), int(options.interval), METRICS[options.metric],
+                          int(options.headings), float(options.window_max_m), float(options.fix_std_m),
+                          f.initial_area_m**2 / 12.0, f.initial_std_heading_rad ** 2, scenario.position_noise_m()**2,
+                          math.radians(options.heading_drift_deg_sqrt_s) ** 2 * scenario.sampling_time_s,
+                          f.measurement_noise_altitude_m, f.divergence_sigma)
+
+
+def run_tercom(nav, beams, ranges, zargs, settings: TercomSettings) -> dict:
+    """TERCOM on plain arrays (``nav`` the navigation solution at the K updates,
+    :class:`~tanbench.navigation.increments.NavAtUpdates`; beams, ranges, the map's kernel args).
+
+    Deterministic. Returns the corrected navigation solution per update, its variances and
+    where fixes were taken.
     """
-    from tanbench.filters.beams import nav_frame_offsets
-
-    nav_en = np.asarray(nav_en, dtype=float)
-    offsets = nav_frame_offsets(nav_pitch, nav_roll, nav_yaw, beams, ranges)
+    nav_en = np.asarray(nav.en, dtype=float)
+    offsets = nav_frame_offsets(nav.pitch, nav.roll, nav.yaw, beams, ranges)
     k_steps = offsets.shape[0]
     est = np.empty((k_steps, 3))
     var = np.empty((k_steps, 3))
     fixes = np.zeros(k_steps, dtype=np.int64)
-    tercom_loop(np.ascontiguousarray(np.diff(nav_en, axis=0)), offsets, np.ascontiguousarray(nav_up, dtype=float),
-                nav_en[0, 0], nav_en[0, 1], *zargs, int(profile_len), int(interval), METRICS[metric], int(headings),
-                float(window_max_m), float(fix_std_m), initial_area_m**2 / 12.0,
-                math.radians(initial_std_heading_deg) ** 2, sig_pos**2,
-                math.radians(heading_drift_deg_sqrt_s) ** 2 * sampling_time_s, sig_u, div_sigma, est, var, fixes)
-    return {"est_e": est[:, 0], "est_n": est[:, 1], "est_yaw": np.asarray(nav_yaw) + est[:, 2],
+    tercom_loop(np.ascontiguousarray(np.diff(nav_en, axis=0)), offsets, np.ascontiguousarray(nav.up, dtype=float),
+                nav_en[0, 0], nav_en[0, 1], MapArgs(*zargs), settings, TercomOutputs(est, var, fixes))
+    return {"est_e": est[:, 0], "est_n": est[:, 1], "est_yaw": np.asarray(nav.yaw) + est[:, 2],
             "var_e": var[:, 0], "var_n": var[:, 1], "var_yaw": var[:, 2], "fixes": fixes}

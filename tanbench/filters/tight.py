@@ -20,7 +20,11 @@ blocks from the generator ``filters/rng.py`` gives the loop. Per update k:
    collapsed below ``min_spread`` metres, re-spread it (the paper's reinitialisation of a
    too-small cloud).
 
-The paper-as-written readings (``readings``, a :class:`tanbench.filters.params.Readings`;
+The loop's settings are the bundles below, each built from the scenario's ``FilterSpec``
+by one constructor beside it (:func:`tight_settings` gathers them; the defaults live in the
+spec only); the navigation solution at the updates comes in one :class:`TightTrack`.
+
+The paper-as-written readings (``readings``, a :class:`Readings`;
 docs/model.md section 10): a non-zero ``propagation`` moves the particles with one Euler
 step of Eq. 1 over ``dt`` on ``euler_in`` instead of the exact increments; ``cloud_std``
 > 0 draws (and redraws) the horizontal cloud as a Gaussian of that std instead of the
@@ -32,6 +36,7 @@ the initial spread around the estimate (the whole state, as a divergence does).
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
@@ -39,19 +44,102 @@ import numpy as np
 from tanbench.filters import FASTMATH
 from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
-                                        work_block)
+from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, likelihood_of, loglik_tight_pass,
+                                        new_likelihood_work, work_block)
 from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
-from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
+from tanbench.filters.resample import Resampling, add_log_weights, normalise_with_ess, resample_and_regularise, resampling_of
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference
+from tanbench.options import DISTANCE_INNOVATION, PROPAGATION
+from tanbench.units import DEG_PER_H
 
 REGULARISED_STATES = {
     "position-heading-biases": np.array([E, N, YAW, BX, BZ], dtype=np.int64),
     "heading-biases": np.array([YAW, BX, BZ], dtype=np.int64),
     "biases": np.array([BX, BZ], dtype=np.int64),
 }
+
+# ---- the loop's bundles (named tuples numba passes by value), each with its constructor ----
+# divergence: the best particle's RMS innovation above ``sigma`` for ``steps`` updates
+Divergence = namedtuple("Divergence", "sigma steps")
+
+# process noise (east/north per update, up, attitude), distance innovation mode and std,
+# altitude std, innovation charged to a beam off the map
+TightModel = namedtuple("TightModel", "sig_pos sig_up sig_att dist_mode sig_d sig_u outside_sigma")
+
+# initial cloud: uniform square of side 2 * half_side, Gaussian up, attitude, heading and gyro
+# biases; a re-initialisation draws the square with half side ``reinit_half_side``
+TightPrior = namedtuple("TightPrior", "half_side std_up std_att std_yaw std_bias reinit_half_side")
+
+# the paper-as-written readings (docs/model.md section 10): propagation code (options.PROPAGATION;
+# non-zero = one Euler step of Eq. 1 over ``dt`` on the Euler inputs), horizontal std of a Gaussian
+# initial cloud (0 = the uniform square), whether a diverged filter is reinitialised, and the
+# horizontal std below which a resampled cloud is redrawn with its initial spread (0 = never; the
+# Resampling bundle's min_spread re-spreads instead)
+Readings = namedtuple("Readings", "propagation dt cloud_std div_reinit collapse_spread")
+
+# divergence guards: a horizontal cloud std above ``spread_limit`` m (once converged) counts as a
+# bad update; a cloud std below ``healthy_std`` with a good fit is "healthy" (recovery statistics);
+# the estimate is kept in ``bounds`` (e_min, e_max, n_min, n_max), off if e_min > e_max
+Guard = namedtuple("Guard", "spread_limit healthy_std bounds")
+
+# everything the loop is set with, and the navigation solution at the K updates: the (K-1, 12)
+# increments, yaw, pitch, roll and up (K,) and the (K-1, 4) Euler-step inputs
+TightSettings = namedtuple("TightSettings", "model rs div prior readings lik guard")
+TightTrack = namedtuple("TightTrack", "inc yaw pitch roll up euler_in")
+# what the loop fills: est/var (K, 8), cov_en, ess, reinit, healthy (K,)
+TightOutputs = namedtuple("TightOutputs", "est var cov_en ess reinit healthy")
+
+
+def divergence_of(f) -> Divergence:
+    return Divergence(f.divergence_sigma, f.divergence_steps)
+
+
+def readings_of(f, sampling_time_s: float) -> Readings:
+    """The :class:`Readings` bundle of a ``FilterSpec`` (docs/model.md section 10)."""
+    return Readings(PROPAGATION[f.propagation], float(sampling_time_s),
+                    f.initial_area_m if f.initial_cloud == "gaussian" else 0.0, f.divergence_reinit,
+                    f.min_spread_m if f.collapse_reinit == "initial" else 0.0)
+
+
+def guard_of(f, nmap) -> Guard:
+    """The :class:`Guard` bundle (spread divergence, keep on the map ``nmap``)."""
+    bounds = np.array([nmap.e0, nmap.e_max, nmap.n0, nmap.n_max]) if f.keep_on_map else np.array([1.0, 0.0, 0.0, 0.0])
+    spread = float(f.divergence_spread_m) if f.divergence_spread_m is not None else np.inf
+    return Guard(spread, f.loose_converged_std_m, bounds)
+
+
+def collapse_resampling_of(f, regularised_cols: np.ndarray) -> Resampling:
+    """The Resampling bundle, without the re-spread when a collapsed cloud is redrawn instead."""
+    rs = resampling_of(f, regularised_cols)
+    return rs._replace(min_spread=0.0) if f.collapse_reinit == "initial" else rs
+
+
+def tight_model_of(scenario) -> TightModel:
+    f = scenario.filter
+    sig_d, sig_u = f.measurement_sigmas_m
+    return TightModel(scenario.position_noise_m(sig_d), f.process_noise_up_m, scenario.attitude_noise_rad,
+                      DISTANCE_INNOVATION[f.distance_innovation], sig_d, sig_u, f.outside_map_sigma)
+
+
+def tight_prior_of(f) -> TightPrior:
+    reinit_area_m = f.initial_area_m if f.reinit_area_m is None else f.reinit_area_m
+    return TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
+                      f.initial_std_heading_rad, f.initial_std_gyro_bias_deg_h * DEG_PER_H, reinit_area_m / 2.0)
+
+
+def tight_settings(scenario, nmap) -> TightSettings:
+    """Every bundle of :func:`tight_filter_loop` from ``scenario`` and its navigation map ``nmap``."""
+    f = scenario.filter
+    return TightSettings(tight_model_of(scenario), collapse_resampling_of(f, REGULARISED_STATES[f.regularised_states]),
+                         divergence_of(f), tight_prior_of(f), readings_of(f, scenario.sampling_time_s),
+                         likelihood_of(f), guard_of(f, nmap))
+
+
+def new_tight_outputs(k: int) -> TightOutputs:
+    return TightOutputs(np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k), np.empty(k),
+                        np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64))
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -63,8 +151,14 @@ def _shift_scale(row, centre, std):
 @nb.njit(cache=True)
 def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
     """Initial cloud (``x`` (8, M)): uniform square of side 2 * prior.half_side around
-    (centre_e, centre_n), Gaussians else (``prior`` is a :class:`tanbench.filters.params.TightPrior`)."""
-    uniform_horizontal(x, rng, centre_e, centre_n, prior.half_side)
+    (centre_e, centre_n), Gaussians else (``prior`` is a :class:`TightPrior`)."""
+    draw_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior, prior.half_side)
+
+
+@nb.njit(cache=True)
+def draw_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior, half_side):
+    """:func:`init_tight` with the uniform square's half side given (a re-initialisation's)."""
+    uniform_horizontal(x, rng, centre_e, centre_n, half_side)
     fill_normals(rng, x[U:])
     _shift_scale(x[U], up, prior.std_up)
     _shift_scale(x[PITCH], pitch, prior.std_att)
@@ -75,19 +169,16 @@ def init_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior):
 
 
 @nb.njit(cache=True)
-def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges, beams, grid, model, rs, div,
-                      prior, readings, euler_in, lik, guard, est, var, cov_en_out, ess_out, reinit_out,
-                      healthy_out):
-    """Run the filter over all updates; fill est/var (K+1, 8), cov_en_out, ess_out, reinit_out and
-    healthy_out (K+1,).
+def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
+    """Run the filter over all updates; fill the :class:`TightOutputs` ``out``.
 
-    ``x`` (8, M) is the initial cloud, a column per particle. ``cov_en_out`` is the cloud's
-    weighted east/north covariance (``var`` holds the variances). ``grid`` is the navigation
+    ``x`` (8, M) is the initial cloud, a column per particle; ``track`` the navigation
+    solution at the updates (:class:`TightTrack`). ``out.cov_en`` is the cloud's weighted
+    east/north covariance (``out.var`` holds the variances). ``grid`` is the navigation
     map's :class:`~tanbench.terrain.grid.NodeGrid` (with the variance grid interleaved for
-    the map-aware likelihood); ``model``, ``rs``, ``div``, ``prior``, ``readings``, ``lik`` and
-    ``guard`` are the bundles of :mod:`tanbench.filters.params` (TightModel, Resampling,
-    Divergence, TightPrior, Readings, Likelihood, Guard); ``euler_in`` (K, 4) the Euler-step
-    inputs (used if ``readings.propagation``). A horizontal cloud std above
+    the map-aware likelihood); ``settings`` the :class:`TightSettings` (TightModel,
+    Resampling, Divergence, TightPrior, Readings, Likelihood, Guard); ``track.euler_in`` the
+    Euler-step inputs (used if ``readings.propagation``). A horizontal cloud std above
     ``guard.spread_limit``, once the cloud has converged since its last (re)initialisation,
     counts as a bad update like a poor fit; an estimate off ``guard.bounds`` is clamped into
     them and the cloud reinitialised there (:func:`keep_on_map`). ``healthy_out[k]`` is 1 when
@@ -100,6 +191,9 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
     (and, for the Euler step, about the navigation pitch and roll there); the beams about the
     navigation attitude with its yaw moved by the same offset.
     """
+    inc, nav_yaw, nav_pitch, nav_roll, nav_up, euler_in = track
+    model, rs, div, prior, readings, lik, guard = settings
+    est, var, cov_en_out, ess_out, reinit_out, healthy_out = out
     m = x.shape[1]
     steps = ranges.shape[0]
     logw = np.zeros(m)
@@ -159,7 +253,8 @@ def tight_filter_loop(x, rng, inc, nav_yaw, nav_pitch, nav_roll, nav_up, ranges,
         diverged = readings.div_reinit and bad >= div.steps
         collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
         if diverged or collapsed or off_map:
-            init_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior)
+            draw_tight(x, rng, mean[E], mean[N], nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior,
+                       prior.reinit_half_side)
             if readings.cloud_std > 0.0:
                 gaussian_horizontal(x, rng, mean[E], mean[N], readings.cloud_std)
             logw[:] = 0.0

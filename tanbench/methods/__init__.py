@@ -3,7 +3,7 @@
 ``run_method`` is what the sweep engine calls: it builds the method's
 :class:`~tanbench.methods.api.MethodContext` from the run's observations (never the
 truth; read-only, in the method's own copies), runs the method, checks its output and
-scores it (:mod:`tanbench.scoring`). ``run_estimates`` is its first half, which
+scores it (:mod:`tanbench.scoring`) against the bound its record names. ``run_estimates`` is its first half, which
 ``tanbench replay`` shares for recorded missions.
 """
 
@@ -13,9 +13,12 @@ import time
 
 import numpy as np
 
+from tanbench.bounds.pcrb import method_bound
 from tanbench.methods.api import (MethodContext, MethodOutput, Updates, as_output, check_start_on_map,
                                   input_write_error, method_inputs, method_view, update_indices)
 from tanbench.methods.registry import MethodRecord, get, names, register
+from tanbench.scoring import score
+from tanbench.terrain import navigation_map
 
 __all__ = ["MethodContext", "MethodOutput", "MethodRecord", "Updates", "get", "names", "register",
            "run_method", "run_estimates", "method_context", "check_start_on_map", "update_indices"]
@@ -29,8 +32,6 @@ def method_context(scenario, name: str, vehicle, seed: np.random.SeedSequence, r
     navigation map (default: the scenario's, checked against the start of its track). Both
     reach the method read-only, in objects of its own.
     """
-    from tanbench.terrain import navigation_map
-
     record = record or get(name)
     if nmap is None:
         nmap = navigation_map(scenario.terrain, scenario.map_resolution_m)
@@ -62,7 +63,5 @@ def run_estimates(scenario, name: str, vehicle, seed: np.random.SeedSequence, nm
 
 def run_method(scenario, name: str, vehicle, seed: np.random.SeedSequence):
     """Run method ``name`` on one run's ``vehicle`` data with its filter ``seed``; score it."""
-    from tanbench.scoring import score
-
     ctx, out, wall = run_estimates(scenario, name, vehicle, seed)
-    return score(scenario, vehicle, ctx.updates, out, wall, name)
+    return score(scenario, vehicle, ctx.updates, out, wall, name, bound=method_bound(scenario, get(name).bound))

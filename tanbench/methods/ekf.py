@@ -11,8 +11,12 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from tanbench.filters.ekf import ekf_settings
+from tanbench.filters.ekf import run_ekf as ekf_driver
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
+from tanbench.navigation.increments import compute_increments, nav_at_updates
+from tanbench.units import DEG_PER_H
 
 
 class EkfOptions(BaseModel):
@@ -25,24 +29,10 @@ class EkfOptions(BaseModel):
 
 def run_ekf_dvl(ctx: MethodContext) -> MethodOutput:
     """The iterated EKF (SITAN) on the 4 DVL beams with slopes over the position uncertainty."""
-    from tanbench.filters.ekf import run_ekf as ekf_driver
-    from tanbench.filters.propagate import position_noise
-    from tanbench.navigation.increments import compute_increments
-    from tanbench.options import DISTANCE_INNOVATION
-    from tanbench.sensors.imu import DEG_PER_H
-
-    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
-    f, o = sc.filter, ctx.options
-    T = sc.sampling_time_s
+    obs, nav, upd = ctx.obs, ctx.nav, ctx.updates.imu
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
-    out = ekf_driver(
-        nav.pos[upd, :2], nav.pos[upd, 2], nav.pitch[upd], nav.roll[upd], nav.yaw[upd], inc, obs.dvl_beams,
-        obs.dvl_ranges[ctx.updates.rows], ctx.nmap.kernel_args(), ctx.rng, initial_area_m=f.initial_area_m,
-        initial_std_heading_deg=f.initial_std_heading_deg, initial_std_gyro_bias_deg_h=f.initial_std_gyro_bias_deg_h,
-        sig_pos=position_noise(f.process_noise_velocity_mps * T, f.measurement_noise_distance_m,
-                               DISTANCE_INNOVATION[f.distance_innovation]),
-        heading_drift_deg_sqrt_s=o.heading_drift_deg_sqrt_s, sampling_time_s=T, sig_u=f.measurement_noise_altitude_m,
-        iterations=o.iterations, gate=o.gate)
+    out = ekf_driver(nav_at_updates(nav, upd), inc, obs.dvl_beams, obs.dvl_ranges[ctx.updates.rows],
+                     ctx.nmap.kernel_args(), ekf_settings(ctx.scenario, ctx.options))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],
                         var_n=out["var_n"], var_heading=out["var_yaw"] * (180.0 / math.pi) ** 2,
                         extra={"update_rejected": out["rejected"].astype(float),
@@ -51,7 +41,7 @@ def run_ekf_dvl(ctx: MethodContext) -> MethodOutput:
 
 def ekf_steps(scenario) -> float:
     o = EkfOptions(**(scenario.method_options or {}).get("ekf-dvl", {}))
-    return o.iterations * (scenario.duration_s or 1190.0) / scenario.sampling_time_s
+    return o.iterations * scenario.planned_duration_s / scenario.sampling_time_s
 
 
 EKF_DVL = register(MethodRecord(

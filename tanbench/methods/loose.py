@@ -17,19 +17,22 @@ import numpy as np
 
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.methods.tight import (divergence_bundle, guard_bundle, likelihood_bundle, likelihood_grid,
-                                    measurement_sigmas, position_step_noise, readings_bundle, resampling_of)
+from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
+from tanbench.filters.likelihood import likelihood_grid, likelihood_of
+from tanbench.filters.loose import (LOOSE_COLS, FixOnlyOutputs, FixOnlySettings, FixOnlyTrack, KalmanOutputs,
+                                    KalmanSettings, KalmanTrack, LooseKalman, LooseModel, loose_filter_loop,
+                                    loose_kalman_loop)
+from tanbench.filters.rng import loop_rng
+from tanbench.filters.state import N_LOOSE
+from tanbench.filters.tight import collapse_resampling_of, divergence_of, guard_of, readings_of
+from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR
+from tanbench.navigation.increments import compute_increments
+from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
+from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 
 def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     """The loosely coupled position-only particle filter feeding fixes to the navigation system."""
-    from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
-    from tanbench.filters.loose import LOOSE_COLS, loose_filter_loop
-    from tanbench.filters.params import LooseModel
-    from tanbench.filters.rng import loop_rng
-    from tanbench.filters.state import N_LOOSE
-    from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
-
     sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
     f = sc.filter
     T = sc.sampling_time_s
@@ -37,11 +40,11 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     ranges = obs.dvl_ranges[ctx.updates.rows]
     c = dcm_body_to_nav_numpy(nav.pitch[upd], nav.roll[upd], nav.yaw[upd])  # (K, 3, 3)
     offsets = np.ascontiguousarray(np.einsum("kij,bj->kbi", c, obs.dvl_beams) * ranges[:, :, None])
-    model = LooseModel(position_step_noise(f, T),
-                       math.radians(f.initial_std_heading_deg) if f.loose_heading_noise else 0.0,
-                       measurement_sigmas(f)[1], f.outside_map_sigma, f.loose_converged_std_m)
+    model = LooseModel(sc.position_step_m,
+                       f.initial_std_heading_rad if f.loose_heading_noise else 0.0,
+                       f.measurement_sigmas_m[1], f.outside_map_sigma, f.loose_converged_std_m)
     rng = loop_rng(ctx.rng, f.random_numbers)
-    readings = readings_bundle(f, T)
+    readings = readings_of(f, T)
     x = np.empty((N_LOOSE, sc.particles))  # a column per particle
     uniform_horizontal(x, rng, nav.pos[upd[0], 0], nav.pos[upd[0], 1], half)
     if readings.cloud_std > 0.0:
@@ -52,11 +55,10 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     if f.loose_architecture == "kalman-feedback":
         return _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed)
     d0 = np.ascontiguousarray(np.diff(nav.pos[upd, :2], axis=0))
-    loose_filter_loop(x, rng, d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2],
-                      offsets, likelihood_grid(f, ctx.nmap), model,
-                      resampling_of(f, LOOSE_COLS), divergence_bundle(f), half, readings, out_en, var, cov_en, ess,
-                      reinit,
-                      fixed)
+    loose_filter_loop(x, rng, FixOnlyTrack(d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2]),
+                      offsets, likelihood_grid(f, ctx.nmap),
+                      FixOnlySettings(model, collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), half, readings),
+                      FixOnlyOutputs(out_en, var, cov_en, ess, reinit, fixed))
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], var_e=var[:, 0], var_n=var[:, 1], cov_en=cov_en,
                         ess=ess, reinit=reinit.astype(bool),
                         extra={"position_fix": fixed.astype(float), "healthy": fixed.astype(float)})
@@ -64,32 +66,27 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
 
 def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed) -> MethodOutput:
     """The closed loop: PF -> terrain-only fixes -> navigation KF -> corrected navigation -> PF."""
-    from tanbench.filters.loose import LOOSE_COLS, loose_kalman_loop
-    from tanbench.filters.params import LooseKalman
-    from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR
-    from tanbench.navigation.increments import compute_increments
-    from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
-
     sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
     f, s, T = sc.filter, sc.sensors, sc.sampling_time_s
     k = upd.size
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
     p_kf = np.zeros((N_ERROR, N_ERROR))
     p_kf[EE, EE] = p_kf[EN, EN] = f.initial_area_m ** 2 / 12.0
-    p_kf[EPSI, EPSI] = math.radians(f.initial_std_heading_deg) ** 2
-    p_kf[EB, EB] = (f.initial_std_gyro_bias_deg_h * DEG_PER_H) ** 2
+    p_kf[EPSI, EPSI] = f.initial_std_heading_rad ** 2
+    p_kf[EB, EB] = f.initial_std_gyro_bias_rad_s ** 2
     # the random walk that keeps a first-order Gauss-Markov bias's steady-state std (data sheet values)
     q_bias = s.gyro_bias_instability_deg_h * DEG_PER_H * math.sqrt(2.0 * T / s.gyro_bias_corr_time_s)
-    kf = LooseKalman(position_step_noise(f, T), s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
+    kf = LooseKalman(sc.position_step_m, s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
                      q_bias, max(1, int(round(f.loose_fix_interval_s / T))), f.loose_fix_gate, f.loose_fix_floor_m,
                      f.loose_fix_max_std_m, f.loose_fix_misses)
     out_en[0] = nav.pos[upd[0], :2]
     out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
-    loose_kalman_loop(x, rng, inc, nav.yaw[upd], nav.pos[upd, 2], offsets, likelihood_grid(f, ctx.nmap), model,
-                      resampling_of(f, LOOSE_COLS), divergence_bundle(f), f.initial_area_m / 2.0,
-                      likelihood_bundle(f), guard_bundle(f, ctx.nmap), kf, p_kf,
-                      out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
+    settings = KalmanSettings(model, collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), f.initial_area_m / 2.0,
+                              likelihood_of(f), guard_of(f, ctx.nmap), kf)
+    loose_kalman_loop(x, rng, KalmanTrack(inc, nav.yaw[upd], nav.pos[upd, 2]), offsets, likelihood_grid(f, ctx.nmap),
+                      settings, p_kf, KalmanOutputs(out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed,
+                                                    rejected, healthy))
     return MethodOutput(east=out_en[:, 0], north=out_en[:, 1], yaw=out_yaw, var_e=var[:, 0], var_n=var[:, 1],
                         var_heading=np.degrees(np.sqrt(var_yaw)) ** 2, ess=ess, reinit=reinit.astype(bool),
                         extra={"position_fix": fixed.astype(float), "fix_accepted": fixed.astype(float),

@@ -11,8 +11,12 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from tanbench.filters.mpf import mpf_settings
+from tanbench.filters.mpf import run_mpf as mpf_driver
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
+from tanbench.navigation.increments import compute_increments, nav_at_updates
+from tanbench.units import DEG_PER_H
 
 
 class MpfOptions(BaseModel):
@@ -24,31 +28,10 @@ class MpfOptions(BaseModel):
 
 def run_mpf_dvl(ctx: MethodContext) -> MethodOutput:
     """The marginalized PF: particles for position and yaw, a KF per particle for depth and z-gyro biases."""
-    from tanbench.filters.mpf import REG_COLS
-    from tanbench.filters.mpf import run_mpf as mpf_driver
-    from tanbench.filters.propagate import position_noise
-    from tanbench.methods.tight import resampling_bundle
-    from tanbench.navigation.increments import compute_increments
-    from tanbench.options import DISTANCE_INNOVATION
-    from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
-
-    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
-    f, o, s = sc.filter, ctx.options, sc.sensors
-    T = sc.sampling_time_s
-    inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
-    out = mpf_driver(
-        nav.pos[upd, :2], nav.pos[upd, 2], nav.pitch[upd], nav.roll[upd], nav.yaw[upd], inc, obs.dvl_beams,
-        obs.dvl_ranges[ctx.updates.rows], ctx.nmap.kernel_args(), ctx.rng, particles=sc.particles,
-        initial_area_m=f.initial_area_m, initial_std_heading_deg=f.initial_std_heading_deg,
-        initial_std_gyro_bias_deg_h=f.initial_std_gyro_bias_deg_h,
-        initial_std_depth_bias_m=o.initial_std_depth_bias_m,
-        sig_pos=position_noise(f.process_noise_velocity_mps * T, f.measurement_noise_distance_m,
-                               DISTANCE_INNOVATION[f.distance_innovation]),
-        sig_att_step=f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T), sampling_time_s=T,
-        gyro_bias_corr_time_s=s.gyro_bias_corr_time_s, gyro_bias_instability_deg_h=s.gyro_bias_instability_deg_h,
-        depth_bias_walk_m_sqrt_s=o.depth_bias_walk_m_sqrt_s, sig_u=f.measurement_noise_altitude_m,
-        outside_sigma=f.outside_map_sigma, resampling=resampling_bundle(f, REG_COLS),
-        divergence=(f.divergence_sigma, f.divergence_steps))
+    obs, upd = ctx.obs, ctx.updates.imu
+    inc = compute_increments(obs.dt, ctx.nav.pos, ctx.nav.pitch, ctx.nav.roll, ctx.nav.yaw, upd)
+    out = mpf_driver(nav_at_updates(ctx.nav, upd), inc, obs.dvl_beams, obs.dvl_ranges[ctx.updates.rows],
+                     ctx.nmap.kernel_args(), ctx.rng, mpf_settings(ctx.scenario, ctx.options))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],
                         var_n=out["var_n"], var_heading=out["var_yaw"] * (180.0 / math.pi) ** 2, ess=out["ess"],
                         reinit=out["reinit"].astype(bool),

@@ -13,8 +13,11 @@ import math
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from tanbench.filters.pmf import pmf_settings
+from tanbench.filters.pmf import run_pmf as pmf_driver
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
+from tanbench.navigation.increments import nav_at_updates
 
 
 class PmfOptions(BaseModel):
@@ -31,24 +34,11 @@ class PmfOptions(BaseModel):
 
 
 def run_pmf(ctx: MethodContext, sensor: str) -> MethodOutput:
-    from tanbench.filters.pmf import run_pmf as pmf_driver
-    from tanbench.filters.propagate import position_noise
-    from tanbench.options import DISTANCE_INNOVATION
-
-    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
-    f, o = sc.filter, ctx.options
-    T = sc.sampling_time_s
+    obs, upd = ctx.obs, ctx.updates.imu
     beams = obs.dvl_beams if sensor == "dvl" else obs.sbe_beams
     ranges = (obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows]
-    out = pmf_driver(
-        nav.pos[upd, :2], nav.pos[upd, 2], nav.pitch[upd], nav.roll[upd], nav.yaw[upd], beams, ranges,
-        ctx.nmap.kernel_args(), ctx.rng, cells=o.cells, headings=o.headings, heading_span_deg=o.heading_span_deg,
-        initial_area_m=f.initial_area_m, initial_std_heading_deg=f.initial_std_heading_deg,
-        sig_pos=position_noise(f.process_noise_velocity_mps * T, f.measurement_noise_distance_m,
-                               DISTANCE_INNOVATION[f.distance_innovation]),
-        heading_drift_deg_sqrt_s=o.heading_drift_deg_sqrt_s, sampling_time_s=T, min_spacing_m=o.min_spacing_m,
-        sig_u=f.measurement_noise_altitude_m, outside_sigma=f.outside_map_sigma, div_sigma=f.divergence_sigma,
-        div_steps=f.divergence_steps)
+    out = pmf_driver(nav_at_updates(ctx.nav, upd), beams, ranges, ctx.nmap.kernel_args(),
+                     pmf_settings(ctx.scenario, ctx.options))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],
                         var_n=out["var_n"], var_heading=out["var_yaw"] * (180.0 / math.pi) ** 2,
                         reinit=out["reinit"].astype(bool),
@@ -71,8 +61,7 @@ def grid_steps(name: str):
 
     def units(scenario) -> float:
         o = PmfOptions(**(scenario.method_options or {}).get(name, {}))
-        duration = scenario.duration_s or 1190.0
-        return o.cells**2 * max(1.0, o.headings / 4.0) * duration / scenario.sampling_time_s
+        return o.cells**2 * max(1.0, o.headings / 4.0) * scenario.planned_duration_s / scenario.sampling_time_s
 
     return units
 

@@ -46,8 +46,7 @@ _builtins_loaded = False
 
 def particle_steps(scenario) -> float:
     """The default cost unit: particles x updates."""
-    duration = scenario.duration_s or 1190.0
-    return scenario.particles * duration / scenario.sampling_time_s
+    return scenario.particles * scenario.planned_duration_s / scenario.sampling_time_s
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,11 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from tanbench.filters.tercom import run_tercom as tercom_driver
+from tanbench.filters.tercom import tercom_settings
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
+from tanbench.navigation.increments import nav_at_updates
 
 
 class TercomOptions(BaseModel):
@@ -30,22 +33,9 @@ class TercomOptions(BaseModel):
 
 def run_tercom_dvl(ctx: MethodContext) -> MethodOutput:
     """TERCOM: the last N pings' DVL profile matched against the map; fixes correct the navigation solution."""
-    from tanbench.filters.propagate import position_noise
-    from tanbench.filters.tercom import run_tercom as tercom_driver
-    from tanbench.options import DISTANCE_INNOVATION
-
-    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
-    f, o = sc.filter, ctx.options
-    T = sc.sampling_time_s
-    out = tercom_driver(
-        nav.pos[upd, :2], nav.pos[upd, 2], nav.pitch[upd], nav.roll[upd], nav.yaw[upd], obs.dvl_beams,
-        obs.dvl_ranges[ctx.updates.rows], ctx.nmap.kernel_args(), ctx.rng, profile_len=o.profile_pings,
-        interval=o.interval, metric=o.metric, headings=o.headings, window_max_m=o.window_max_m,
-        fix_std_m=o.fix_std_m, initial_area_m=f.initial_area_m, initial_std_heading_deg=f.initial_std_heading_deg,
-        sig_pos=position_noise(f.process_noise_velocity_mps * T, f.measurement_noise_distance_m,
-                               DISTANCE_INNOVATION[f.distance_innovation]),
-        heading_drift_deg_sqrt_s=o.heading_drift_deg_sqrt_s, sampling_time_s=T, sig_u=f.measurement_noise_altitude_m,
-        div_sigma=f.divergence_sigma)
+    obs = ctx.obs
+    out = tercom_driver(nav_at_updates(ctx.nav, ctx.updates.imu), obs.dvl_beams, obs.dvl_ranges[ctx.updates.rows],
+                        ctx.nmap.kernel_args(), tercom_settings(ctx.scenario, ctx.options))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],
                         var_n=out["var_n"], var_heading=out["var_yaw"] * (180.0 / math.pi) ** 2,
                         extra={"position_fix": out["fixes"].astype(float)})
@@ -54,7 +44,7 @@ def run_tercom_dvl(ctx: MethodContext) -> MethodOutput:
 def profile_matches(scenario) -> float:
     """Cost units: profile points x coarse candidates per match x matches (a 7 x 7 window, 4 beams)."""
     o = TercomOptions(**(scenario.method_options or {}).get("tercom-dvl", {}))
-    matches = (scenario.duration_s or 1190.0) / scenario.sampling_time_s / o.interval
+    matches = scenario.planned_duration_s / scenario.sampling_time_s / o.interval
     return matches * o.profile_pings * 4 * o.headings * 49
 
 

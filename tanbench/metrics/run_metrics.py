@@ -17,19 +17,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from tanbench.bounds.pcrb import method_bound
 from tanbench.metrics.consistency import nees, run_summary
 
 
 def score_consistency_and_bound(scenario, method: str | None, t: np.ndarray, err_e, err_n, var_e, var_n, cov_en,
                                 convergence_time_s: float, rmse_after_convergence_m: float,
                                 bound=None) -> tuple[dict, dict]:
-    """(metrics, series) of the module docstring for one run; ``bound``: the PCRB series to use
-    (default: the cell's bound of ``method``, none without a method)."""
+    """(metrics, series) of the module docstring for one run; ``bound``: the PCRB series of the
+    method in the cell (:func:`tanbench.bounds.pcrb.method_bound`, handed down by the caller; None: no bound)."""
     values = nees(err_e, err_n, var_e, var_n, cov_en)
     metrics = run_summary(t, values, convergence_time_s)
-    if bound is None and method is not None:
-        bound = method_bound(scenario, method)
     nan = np.full(t.size, np.nan)
     if bound is None or bound["t"].size != t.size:
         pcrb_h, pcrb_psi = nan, nan

@@ -20,6 +20,8 @@ from tanbench.errors import TanbenchError
 from tanbench.missions.spec import (ACCEL, ANGLE_UNITS, ATTITUDE, GYRO, LOCAL, LONLAT, META_FILE, RATE_UNITS,
                                     SUFFIXES, TABLES, TIME, VELOCITY, LogMeta, parse_yaml_model, range_columns,
                                     to_rfu)
+from tanbench import store
+from tanbench.missions.spec import FORMAT_VERSION
 
 
 @dataclass
@@ -254,9 +256,6 @@ def write_log(directory, log: MissionLog, fmt: str = "parquet") -> list[Path]:
     anything but a mission log is refused.
     """
     import yaml
-
-    from tanbench import store
-    from tanbench.missions.spec import FORMAT_VERSION
 
     directory = Path(directory)
     if fmt not in ("parquet", "csv"):

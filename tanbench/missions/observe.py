@@ -25,6 +25,8 @@ from tanbench.errors import TanbenchError
 from tanbench.missions.logfile import MissionLog
 from tanbench.missions.spec import ACCEL, GYRO, LONLAT, LOCAL, TIME, VELOCITY, range_columns
 from tanbench.simulation import NavSolution, Observations
+from tanbench.methods.api import update_indices
+from tanbench.terrain.georef import lonlat_to_local
 
 IMU_JITTER = 0.01  # largest departure of an IMU sample interval from 1 / imu_rate_hz, as a fraction of it
 
@@ -194,8 +196,6 @@ def altimeter_at_pings(log: MissionLog, ping_t: np.ndarray) -> np.ndarray:
 
 def horizontal_local(log: MissionLog, track: dict, nmap) -> np.ndarray:
     """(n, 3) east, north, up of a navigation or reference track in the map's local frame."""
-    from tanbench.terrain.georef import lonlat_to_local
-
     up = track.get("up_m", np.full(track[LONLAT[0] if log.lonlat else LOCAL[0]].size, np.nan))
     if not log.lonlat:
         return np.ascontiguousarray(np.column_stack([track[LOCAL[0]], track[LOCAL[1]], up]))
@@ -231,8 +231,6 @@ def _true_ranges(log: MissionLog) -> dict:
 def check_start_on_map(scenario, obs: Observations, nmap, label: str) -> None:
     """Refuse a log whose first update's initial uncertainty (``filter.initial_area_m`` around the
     navigation solution) leaves the map: the log and the map do not belong together."""
-    from tanbench.methods.api import update_indices
-
     k0 = update_indices(scenario, obs).imu[0]
     e, n = obs.nav.pos[k0, 0], obs.nav.pos[k0, 1]
     half = scenario.filter.initial_area_m / 2.0

@@ -34,6 +34,24 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from tanbench.errors import TanbenchError
 from tanbench.missions.logfile import MissionLog, read_log
 from tanbench.missions.observe import LoggedRun, check_start_on_map, observations, reference_truth
+from tanbench import store
+from tanbench.bounds.pcrb import bound_series, update_track
+from tanbench.config import SensorSpec, TerrainSpec, flatten, format_validation_error
+from tanbench.errors import describe_exception
+from tanbench.kernel_cache import is_warm as numba_cache_is_warm
+from tanbench.methods import run_estimates
+from tanbench.methods.registry import get
+from tanbench.missions.spec import parse_yaml_model
+from tanbench.profiles import profile_settings
+from tanbench.runner.seeds import seed_number
+from tanbench.runner.tasks import guard_exits, run_guarded
+from tanbench.schema import METRIC_COLUMNS, rows_table
+from tanbench.scoring import score
+from tanbench.sensors.sonar import true_ranges
+from tanbench.sweep import _merge, _set_dotted, make_scenario
+from tanbench.terrain.files import load_file_terrain, terrain_content_hash
+from tanbench.terrain.georef import local_to_lonlat
+from tanbench.vehicle.attitude import yaw_to_heading_deg
 
 REPLAY_STREAM = 3  # spawn-key stream of a replay's methods (runner.seeds uses 1 for vehicles, 2 for filters)
 DEFAULT_METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")
@@ -73,15 +91,11 @@ class ReplayReport:
 
 def method_seed(seed: int, method: str) -> np.random.SeedSequence:
     """The seed of ``method``'s random numbers in a replay with root ``seed``."""
-    from tanbench.methods.registry import get
-
     return np.random.SeedSequence(seed, spawn_key=(REPLAY_STREAM, get(method).seed_id))
 
 
 def load_settings(path: Path | None) -> tuple[ReplaySettings, str]:
     """The settings file (and its text); no file: every default."""
-    from tanbench.missions.spec import parse_yaml_model
-
     if path is None:
         return ReplaySettings(), ""
     try:
@@ -100,10 +114,6 @@ def load_settings(path: Path | None) -> tuple[ReplaySettings, str]:
 
 def read_map(settings: ReplaySettings, map_path: str | None, label: str):
     """The navigation map (used as it is) and its terrain spec; ``map_path`` replaces ``map.path``."""
-    from tanbench.config import TerrainSpec
-    from tanbench.config import format_validation_error
-    from tanbench.terrain.files import load_file_terrain
-
     keys = dict(settings.map)
     if map_path is not None:
         keys["path"] = map_path
@@ -121,9 +131,6 @@ def replay_scenario(log: MissionLog, settings: ReplaySettings, spec, nmap, label
     """The scenario a replay's methods see: the log's sensors and range noise, the settings' methods
     settings, the map (its resolution). Its world sections only make it a valid Scenario: methods
     never see them (``method_view``) and the results leave them empty."""
-    from tanbench.profiles import profile_settings
-    from tanbench.sweep import _merge, _set_dotted, make_scenario
-
     base: dict = {}
     for k, v in profile_settings(settings.profile).items():
         _set_dotted(base, k, v)
@@ -138,8 +145,6 @@ def replay_scenario(log: MissionLog, settings: ReplaySettings, spec, nmap, label
 
 def parse_methods(values) -> list[str]:
     """``--methods a,b --methods c`` as a checked list (registry names or package.module:function)."""
-    from tanbench.methods.registry import get
-
     names = [n.strip() for v in (values or [",".join(DEFAULT_METHODS)]) for n in v.split(",") if n.strip()]
     if not names:
         raise TanbenchError("--methods names no method")
@@ -150,8 +155,6 @@ def parse_methods(values) -> list[str]:
 
 def input_notes(log: MissionLog) -> list[str]:
     """What the replay assumed about the log (figures it did not give, data no method reads yet)."""
-    from tanbench.config import SensorSpec
-
     notes = []
     missing = [k for k in SensorSpec.model_fields if k not in log.meta.sensors.model_fields_set
                and k not in ("grade", "beam_tilt_deg", "beam_azimuths_deg")]
@@ -170,7 +173,6 @@ def replay(log_dir, map_path: str | None = None, methods=None, settings_path=Non
     """Run ``methods`` over the log in ``log_dir`` and the map; write the results to ``out``."""
     import yaml
 
-    from tanbench.kernel_cache import is_warm as numba_cache_is_warm
 
     log = read_log(log_dir)
     label = str(settings_path or log.path)
@@ -208,13 +210,6 @@ def replay(log_dir, map_path: str | None = None, methods=None, settings_path=Non
 
 def _run_one(scenario, name, run: LoggedRun, nmap, seed, log, bounds):
     """One method over the run: its row, its estimates frame and (with a reference) its series frame."""
-    from tanbench.config import flatten
-    from tanbench.methods import run_estimates
-    from tanbench.runner.seeds import seed_number
-    from tanbench.errors import describe_exception
-    from tanbench.runner.tasks import guard_exits, run_guarded
-    from tanbench.scoring import score
-
     fseed = method_seed(seed, name)
     settings = {k: v for k, v in flatten(scenario.normalized()).items() if k.split(".")[0] not in NOT_IN_REPLAY}
     row = {"sweep": "replay", "tables": "", "method": name, "run": 0, "seed": seed,
@@ -237,10 +232,6 @@ def _run_one(scenario, name, run: LoggedRun, nmap, seed, log, bounds):
 
 def _bound(scenario, name, run: LoggedRun, nmap, cache):
     """The method's posterior Cramer-Rao bound along the reference (None: no bound for it or no ranges)."""
-    from tanbench.bounds.pcrb import bound_series, update_track
-    from tanbench.methods.registry import get
-    from tanbench.sensors.sonar import true_ranges
-
     spec = get(name).bound
     if spec is None:
         return None
@@ -261,8 +252,6 @@ def _bound(scenario, name, run: LoggedRun, nmap, cache):
 
 def estimates_frame(name, updates, out, obs, log: MissionLog, nmap) -> pd.DataFrame:
     """A method's estimates at its updates, in the log's coordinates (lon/lat beside the map's metres)."""
-    from tanbench.vehicle.attitude import yaw_to_heading_deg
-
     upd = updates.imu
     nan = np.full(upd.size, np.nan)
     yaw = out.yaw if out.yaw is not None else (-np.radians(out.heading_deg) if out.heading_deg is not None
@@ -287,8 +276,6 @@ def _or(value, default):
 
 
 def _lonlat(log: MissionLog, nmap, prefix: str, east, north) -> dict:
-    from tanbench.terrain.georef import local_to_lonlat
-
     if not log.lonlat:
         return {}
     lon, lat = local_to_lonlat(nmap, east, north)
@@ -303,9 +290,6 @@ def _check_out(out: Path) -> None:
 
 
 def _provenance(log: MissionLog, spec, settings_text: str, seed: int, names) -> dict:
-    from tanbench import store
-    from tanbench.terrain.files import terrain_content_hash
-
     return {**store.provenance(settings_text, "replay", seed), "kind": "replay", "log": str(log.path),
             "log_sha256": log.content_hash(), "log_source": log.meta.source, "map": spec.path,
             "map_sha256": terrain_content_hash(spec), "methods": list(names)}
@@ -313,9 +297,6 @@ def _provenance(log: MissionLog, spec, settings_text: str, seed: int, names) -> 
 
 def _write(out: Path, rows, estimates, series, scored: bool, meta: dict, inputs_text: str) -> None:
     """The results files (atomically each); without a reference, no metrics and no series."""
-    from tanbench import store
-    from tanbench.schema import METRIC_COLUMNS, rows_table
-
     table = rows_table(rows)
     if not scored:
         table = table.drop_columns([c for c in METRIC_COLUMNS if c != "filter_wall_s"])

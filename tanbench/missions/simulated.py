@@ -19,6 +19,11 @@ import pandas as pd
 from tanbench.errors import TanbenchError
 from tanbench.missions.logfile import MissionLog, beam_block
 from tanbench.missions.spec import ACCEL, FORMAT_NAME, FORMAT_VERSION, GYRO, TIME, VELOCITY, LogMeta
+from tanbench import __version__
+from tanbench.config import SensorSpec
+from tanbench.simulation import noise_free_world
+from tanbench.terrain import truth_map
+from tanbench.terrain.georef import local_to_lonlat
 
 MAP_FILE = "map.npz"
 SETTINGS_FILE = "settings.yaml"
@@ -27,10 +32,6 @@ SETTINGS_FILE = "settings.yaml"
 def simulated_log(scenario, vehicle, seed: int, lonlat: bool = False) -> MissionLog:
     """The mission log of one simulated run (``vehicle`` from ``simulate_vehicle(scenario, SeedSequence(seed))``);
     positions in WGS84 lon/lat with ``lonlat`` (the terrain must be georeferenced)."""
-    from tanbench import __version__
-    from tanbench.config import SensorSpec
-    from tanbench.simulation import noise_free_world
-
     obs, truth = vehicle.obs, vehicle.truth
     _, ping_idx, dvl_true, sbe_true = noise_free_world(json.dumps(scenario.world_spec(), sort_keys=True))
     frame = lonlat_frame(scenario) if lonlat else None
@@ -58,8 +59,6 @@ def simulated_log(scenario, vehicle, seed: int, lonlat: bool = False) -> Mission
 
 def _track(t, pos, pitch, roll, yaw, frame) -> pd.DataFrame:
     """A navigation or reference table: position, up and attitude (heading = -yaw, exact)."""
-    from tanbench.terrain.georef import local_to_lonlat
-
     if frame is None:
         horizontal = {"east_m": pos[:, 0], "north_m": pos[:, 1]}
     else:
@@ -71,8 +70,6 @@ def _track(t, pos, pitch, roll, yaw, frame) -> pd.DataFrame:
 
 def lonlat_frame(scenario):
     """The georeferenced map whose frame the run's positions are in (for lon/lat positions)."""
-    from tanbench.terrain import truth_map
-
     tmap = truth_map(scenario.terrain)
     if "m_per_deg_lon" not in tmap.meta:
         raise TanbenchError(

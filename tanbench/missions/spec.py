@@ -23,6 +23,9 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 
 from tanbench.config import SensorSpec, _Strict
 from tanbench.errors import TanbenchError
+from tanbench.config import format_validation_error
+from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
+from tanbench.sweep import MAX_YAML_VALUES, UniqueKeyLoader, expanded_size
 
 FORMAT_NAME = "tanbench-mission-log"
 FORMAT_VERSION = 1
@@ -57,9 +60,6 @@ def parse_yaml_model(text: str, label: str, model: type[BaseModel], keys: str):
     (``keys``: the top-level keys, for the message when the text is not a mapping)."""
     import yaml
     from pydantic import ValidationError
-
-    from tanbench.config import format_validation_error
-    from tanbench.sweep import MAX_YAML_VALUES, UniqueKeyLoader, expanded_size
 
     try:
         data = yaml.load(text, Loader=UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
@@ -109,8 +109,6 @@ class BeamGeometry(_Strict):
 
     def body_vectors(self, body_frame: str) -> np.ndarray:
         """(beams, 3) unit vectors in tanbench's body frame (x starboard, y forward, z up)."""
-        from tanbench.sensors.sonar import dvl_beam_vectors
-
         if self.tilt_deg is not None:
             return dvl_beam_vectors(self.tilt_deg, self.azimuths_deg)  # angles are frame-free
         if self.across_track_deg is not None:
@@ -152,8 +150,6 @@ class LogMeta(_Strict):
 
     def beam_vectors(self, sensor: str) -> np.ndarray | None:
         """(beams, 3) body-frame (rfu) directions of ``sensor``'s beams; None for a multibeam not described."""
-        from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
-
         if sensor in self.beams:
             return self.beams[sensor].body_vectors(self.body_frame)
         if sensor == "dvl":

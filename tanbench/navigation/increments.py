@@ -19,13 +19,27 @@ T = 10 s at 55 deg/h.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
+from tanbench.earth import EARTH_RATE
+from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
+
 # columns of the increments table
 D0E, D0N, JAXE, JAXN, JAZE, JAZN, SX, SZ, DYAW, DPITCH, DROLL, DUP = range(12)
 N_INCREMENTS = 12
+
+# the navigation solution at the filter updates (K,) each, ``en`` (K, 2): what the estimators'
+# drivers take instead of five arrays
+NavAtUpdates = namedtuple("NavAtUpdates", "en up pitch roll yaw")
+
+
+def nav_at_updates(nav, update_idx) -> NavAtUpdates:
+    """The navigation solution ``nav`` (pos, pitch, roll, yaw at the IMU samples) at ``update_idx``."""
+    return NavAtUpdates(nav.pos[update_idx, :2], nav.pos[update_idx, 2], nav.pitch[update_idx], nav.roll[update_idx],
+                        nav.yaw[update_idx])
 
 
 @nb.njit(cache=True)
@@ -135,8 +149,6 @@ def euler_inputs(gyro, vel_dvl, pitch, roll, yaw, earth_rate_n, earth_rate_u, up
 
 def compute_euler_inputs(gyro, vel_dvl, pitch, roll, yaw, latitude_rad, update_idx, window) -> np.ndarray:
     """The (K, 4) Euler-step inputs table (see :func:`euler_inputs`)."""
-    from tanbench.earth import EARTH_RATE
-
     update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
     out = np.empty((max(update_idx.size - 1, 0), N_EULER))
     euler_inputs(np.ascontiguousarray(gyro), np.ascontiguousarray(vel_dvl), np.ascontiguousarray(pitch),
@@ -147,9 +159,6 @@ def compute_euler_inputs(gyro, vel_dvl, pitch, roll, yaw, latitude_rad, update_i
 
 def euler_inputs_numpy(gyro, vel_dvl, pitch, roll, yaw, latitude_rad, update_idx, window) -> np.ndarray:
     """Plain-numpy reference of :func:`compute_euler_inputs`."""
-    from tanbench.earth import EARTH_RATE
-    from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
-
     w_ie = EARTH_RATE * np.array([0.0, math.cos(latitude_rad), math.sin(latitude_rad)])
     c = dcm_body_to_nav_numpy(pitch, roll, yaw)  # (n, 3, 3)
     w_nb = gyro - np.einsum("nji,j->ni", c, w_ie)

@@ -17,6 +17,7 @@ Per sample k (docs/model.md gives the equations and their sources):
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
@@ -30,10 +31,22 @@ def _gravity(g0, r0, up):
     return g0 / (1.0 + up / r0)
 
 
+# the strapdown loop's inputs: the sensor streams at the IMU samples, the start (east, north,
+# yaw), the earth at the latitude (latitude, radii of curvature, gravity and its radius), and
+# its outputs pos (n, 3), pitch, roll, yaw (n,)
+Streams = namedtuple("Streams", "gyro accel vel_dvl depth")
+Start = namedtuple("Start", "e n yaw")
+EarthAt = namedtuple("EarthAt", "lat r_n r_e g0 r0")
+NavOutputs = namedtuple("NavOutputs", "pos pitch roll yaw")
+
+
 @nb.njit(cache=True)
-def strapdown(dt, gyro, accel, vel_dvl, depth, e_start, n_start, yaw_start, lat, r_n, r_e, g0, r0,
-              window, compensate, pos, pitch, roll, yaw):
-    """Fill ``pos`` (n, 3), ``pitch``, ``roll``, ``yaw`` (n,) with the navigation solution."""
+def strapdown(dt, streams, start, earth, window, compensate, out):
+    """Fill ``out`` (:class:`NavOutputs`) with the navigation solution from the :class:`Streams`."""
+    gyro, accel, vel_dvl, depth = streams
+    e_start, n_start, yaw_start = start
+    lat, r_n, r_e, g0, r0 = earth
+    pos, pitch, roll, yaw = out
     n = gyro.shape[0]
     wie_n = EARTH_RATE * math.cos(lat)
     wie_u = EARTH_RATE * math.sin(lat)
@@ -118,10 +131,10 @@ def run_strapdown(dt, gyro, accel, vel_dvl, depth, start_en, yaw_start, latitude
     window = max(1, int(round(window_s / dt)))
     pos = np.empty((n, 3))
     pitch, roll, yaw = np.empty(n), np.empty(n), np.empty(n)
-    strapdown(dt, np.ascontiguousarray(gyro), np.ascontiguousarray(accel),
-              np.ascontiguousarray(vel_dvl), np.ascontiguousarray(depth),
-              float(start_en[0]), float(start_en[1]), float(yaw_start), float(latitude_rad),
-              r_n, r_e, g0, r0, window, bool(compensate), pos, pitch, roll, yaw)
+    streams = Streams(np.ascontiguousarray(gyro), np.ascontiguousarray(accel), np.ascontiguousarray(vel_dvl),
+                      np.ascontiguousarray(depth))
+    strapdown(dt, streams, Start(float(start_en[0]), float(start_en[1]), float(yaw_start)),
+              EarthAt(float(latitude_rad), r_n, r_e, g0, r0), window, bool(compensate), NavOutputs(pos, pitch, roll, yaw))
     return pos, pitch, roll, yaw
 
 

@@ -40,6 +40,7 @@ from tanbench.schema import METRIC_COLUMNS, rows_table
 from tanbench.simulation import PRELOAD_WORLDS_MAX, noise_free_world
 from tanbench.sweep import Sweep
 from tanbench.terrain import sweep_truth_maps
+from tanbench.results import build_outputs
 
 MAX_POOL_STARTS = 3  # worker pools started for one session: the first, and two more after a worker died
 
@@ -116,8 +117,6 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
 
     ``note`` prints what the sweep will recompute and why (stderr by default).
     """
-    from tanbench.results import build_outputs  # the results layer sits above the runner
-
     check_series_mode(series)
     validate_sweep(sweep)
     check_output(sweep, out)

@@ -21,6 +21,10 @@ import numpy as np
 
 from tanbench.errors import TanbenchError, describe_exception
 from tanbench.schema import METRIC_COLUMNS, SERIES_COLUMNS
+from tanbench.config import Scenario
+from tanbench.methods import get, run_method
+from tanbench.runner.seeds import filter_seed, seed_number, vehicle_seed
+from tanbench.simulation import simulate_vehicle
 
 
 @dataclass(frozen=True)
@@ -101,11 +105,6 @@ def run_guarded(method: str, call):
 
 def execute(task: Task) -> TaskResult:
     """Simulate the run's vehicle data once and run every method on it."""
-    from tanbench.config import Scenario
-    from tanbench.methods import get, run_method
-    from tanbench.runner.seeds import filter_seed, seed_number, vehicle_seed
-    from tanbench.simulation import simulate_vehicle
-
     guard_exits()
     scenario = Scenario(**json.loads(task.scenario_json))
     vseed = vehicle_seed(task.root_seed, scenario, task.run)

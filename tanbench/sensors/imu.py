@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lfilter
 
-DEG_PER_H = math.pi / 180.0 / 3600.0  # rad/s
-DEG_PER_SQRT_H = math.pi / 180.0 / 60.0  # rad/sqrt(s)
+from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H  # noqa: F401 - re-exported for the sensors
+
 MG = 9.80665e-3  # m/s^2
 
 

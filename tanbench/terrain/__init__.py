@@ -15,6 +15,11 @@ import json
 from functools import lru_cache
 
 from tanbench.terrain.grid import Map
+from tanbench.terrain.layouts import layout
+from tanbench.terrain.synthetic import synthesize, with_roughness
+from tanbench.config import TerrainSpec
+from tanbench.terrain.derive import derive_navigation_map
+from tanbench.terrain.files import load_file_terrain
 
 __all__ = ["Map", "truth_map", "navigation_map", "file_truth_maps", "sweep_truth_maps", "install_truth_maps"]
 
@@ -71,25 +76,16 @@ def _truth(key: str) -> Map:
 
 @lru_cache(maxsize=8)
 def _truth_cached(key: str) -> Map:
-    from tanbench.config import TerrainSpec
-
     spec = TerrainSpec(**json.loads(key))
     if spec.kind == "synthetic":
-        from tanbench.terrain.layouts import layout
-        from tanbench.terrain.synthetic import synthesize, with_roughness
 
         shape = with_roughness(layout(spec.layout), spec.region_hurst, spec.region_corner_m)
         return synthesize(shape, spec.seed, spec.truth_resolution_m)
-    from tanbench.terrain.files import load_file_terrain
-
     return load_file_terrain(spec)
 
 
 @lru_cache(maxsize=16)
 def _navigation_cached(key: str, resolution_m: float) -> Map:
-    from tanbench.config import TerrainSpec
-    from tanbench.terrain.derive import derive_navigation_map
-
     spec = TerrainSpec(**json.loads(key))
     return derive_navigation_map(_truth(key), resolution_m, spec.map_error_m, spec.seed,
                                  spec.map_error_correlation_m)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tanbench.terrain.grid import Map
+from tanbench.terrain.grid import Map, bilinear_numpy
 
 
 @dataclass(frozen=True)
@@ -115,8 +115,6 @@ def region_weight(e, n, region: Region) -> np.ndarray:
 
 def synthesize(layout: Layout, seed: int, res: float = 2.5) -> Map:
     """Build the truth seafloor of ``layout`` at ``res`` metres with random seed ``seed``."""
-    from tanbench.terrain.grid import bilinear_numpy
-
     e = np.arange(layout.e_range[0], layout.e_range[1] + res / 2, res)
     n = np.arange(layout.n_range[0], layout.n_range[1] + res / 2, res)
     ee, nn = np.meshgrid(e, n)

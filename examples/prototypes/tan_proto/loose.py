@@ -79,14 +79,18 @@ def run_loose(ctx) -> MethodOutput:
     from tanbench.filters.likelihood import BLOCK, beam_constants, new_likelihood_work
     from tanbench.filters.loose import (LOOSE_COLS, _open_window, position_reset, propagate_and_weigh_loose,
                                         reopen_kf)
-    from tanbench.filters.params import LooseKalman, LooseModel
+    from tanbench.filters.loose import LooseKalman, LooseModel
     from tanbench.filters.propagate import DIST_NONE, propagate_tight
     from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
     from tanbench.filters.rng import loop_rng
     from tanbench.filters.state import BZ, E, N, N_LOOSE, N_TIGHT, U, YAW
     from tanbench.filters.tight import keep_on_map
-    from tanbench.methods.tight import (divergence_bundle, guard_bundle, likelihood_bundle, likelihood_grid,
-                                        measurement_sigmas, readings_bundle, resampling_of)
+    from tanbench.filters.likelihood import likelihood_grid
+    from tanbench.filters.likelihood import likelihood_of as likelihood_bundle
+    from tanbench.filters.tight import collapse_resampling_of as resampling_of
+    from tanbench.filters.tight import divergence_of as divergence_bundle
+    from tanbench.filters.tight import guard_of as guard_bundle
+    from tanbench.filters.tight import readings_of as readings_bundle
     from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
     from tanbench.navigation.increments import JAZE, JAZN, SZ, compute_increments
     from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
@@ -103,7 +107,7 @@ def run_loose(ctx) -> MethodOutput:
     offsets = np.ascontiguousarray(np.einsum("kij,bj->kbi", c, obs.dvl_beams) * ranges[:, :, None])
     model = LooseModel(f.process_noise_velocity_mps * T,
                        math.radians(f.initial_std_heading_deg) if f.loose_heading_noise else 0.0,
-                       measurement_sigmas(f)[1], f.outside_map_sigma, f.loose_converged_std_m)
+                       f.measurement_sigmas_m[1], f.outside_map_sigma, f.loose_converged_std_m)
     rng = loop_rng(ctx.rng, f.random_numbers)
     readings = readings_bundle(f, T)
     m = sc.particles

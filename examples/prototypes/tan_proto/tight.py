@@ -121,16 +121,21 @@ def run_tight(ctx, sensor: str) -> MethodOutput:
     from tanbench.filters.estimate import weighted_estimate
     from tanbench.filters.likelihood import (beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
                                             work_block)
-    from tanbench.filters.params import TightModel, TightPrior
-    from tanbench.filters.propagate import DIST_NAVIGATION, position_noise, propagate_tight
+    from tanbench.filters.tight import TightModel, tight_prior_of
+    from tanbench.config import position_noise
+    from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight
     from tanbench.filters.resample import (add_log_weights, apply_resample, normalise_with_ess,
                                           resample_and_regularise, resample_indices)
     from tanbench.filters.rng import fill_normals, fill_uniforms, loop_rng
     from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
     from tanbench.filters.tight import REGULARISED_STATES, init_tight, keep_on_map
     from tanbench.filters.trig import attitude_reference
-    from tanbench.methods.tight import (divergence_bundle, guard_bundle, likelihood_bundle, likelihood_grid,
-                                        measurement_sigmas, readings_bundle, resampling_of)
+    from tanbench.filters.likelihood import likelihood_grid
+    from tanbench.filters.likelihood import likelihood_of as likelihood_bundle
+    from tanbench.filters.tight import collapse_resampling_of as resampling_of
+    from tanbench.filters.tight import divergence_of as divergence_bundle
+    from tanbench.filters.tight import guard_of as guard_bundle
+    from tanbench.filters.tight import readings_of as readings_bundle
     from tanbench.navigation.increments import compute_increments
     from tanbench.options import DISTANCE_INNOVATION
     from tanbench.sensors.imu import DEG_PER_H, DEG_PER_SQRT_H
@@ -145,15 +150,14 @@ def run_tight(ctx, sensor: str) -> MethodOutput:
     ranges = np.ascontiguousarray((obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows])
     inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
     dist_mode = DISTANCE_INNOVATION[f.distance_innovation]
-    sig_d, sig_u = measurement_sigmas(f)
+    sig_d, sig_u = f.measurement_sigmas_m
     if o.range_sigma == "sensor" and sc.noise_m > 0:
         sig_u = sc.noise_m / math.sqrt(3.0)
     model = TightModel(position_noise(f.process_noise_velocity_mps * T, sig_d, dist_mode),
                        f.process_noise_up_m, f.process_noise_attitude_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
                        dist_mode, sig_d, sig_u, f.outside_map_sigma)
     readings = readings_bundle(f, T)
-    prior = TightPrior(f.initial_area_m / 2.0, f.initial_std_up_m, math.radians(f.initial_std_pitch_roll_deg),
-                       math.radians(f.initial_std_heading_deg), f.initial_std_gyro_bias_deg_h * DEG_PER_H)
+    prior = tight_prior_of(f)
     reloc_prior = prior._replace(half_side=o.relocalise_side_m / 2.0)
     rs = resampling_of(f, REGULARISED_STATES[f.regularised_states])
     if o.floor_m is not None:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tanbench.errors import TanbenchError
-from tanbench.terrain.formats import RawGrid, mask_value, register_format
+from tanbench.terrain.formats.registry import RawGrid, mask_value, register_format
 
 _ASC_KEYS = ("ncols", "nrows", "xllcorner", "xllcenter", "xllcentre", "yllcorner", "yllcenter",
              "yllcentre", "cellsize", "dx", "dy", "nodata_value")

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tanbench.errors import TanbenchError
-from tanbench.terrain.formats import RawGrid, as_float, mask_value, register_format
+from tanbench.terrain.formats.registry import RawGrid, as_float, mask_value, register_format
 
 _WEB_MERCATOR_CODES = {3857, 3785, 900913, 102100, 102113}
 

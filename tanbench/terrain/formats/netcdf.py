@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tanbench.errors import TanbenchError
-from tanbench.terrain.formats import RawGrid, as_float, register_format
+from tanbench.terrain.formats.registry import RawGrid, as_float, register_format
 
 _NC_X = ("x", "lon", "longitude")
 _NC_Y = ("y", "lat", "latitude")

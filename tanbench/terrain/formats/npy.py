@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tanbench.errors import TanbenchError
-from tanbench.terrain.formats import RawGrid, as_2d, register_format
+from tanbench.terrain.formats.registry import RawGrid, as_2d, register_format
 
 
 def read_npy(path: Path) -> RawGrid:

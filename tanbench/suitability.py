@@ -28,17 +28,27 @@ Windows shrink at the map edges and skip NaN nodes.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
-import numba as nb
 import numpy as np
 from scipy import ndimage
 
 from tanbench.bounds.pcrb import ping_information, range_sensitivities
+from tanbench.config import FilterSpec, Scenario, SensorSpec, TerrainSpec
+from tanbench.errors import TanbenchError
+from tanbench.plot import pyplot
+from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
+from tanbench.simulation import motion_plan
+from tanbench.sweep import load_sweep
+from tanbench.terrain import navigation_map, truth_map
 from tanbench.terrain.grid import Map
 from tanbench.terrain.stats import gradient, slope_deg
+from tanbench.terrain.windows import window_stats, window_stats_numpy  # noqa: F401 - the numpy twin for the tests
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
+from tanbench.vehicle.trajectory import sample_path
 
 HEADINGS_DEG = (0.0, 22.5, 45.0, 67.5)
 MEASURES = ("predicted_std_m", "information_per_ping", "slope_std_deg", "roughness_m", "entropy")
@@ -119,108 +129,6 @@ def entropy(grid: Map, window_m: float) -> np.ndarray:
     return window_stats(grid.z, *_window_nodes(grid, window_m))[1]
 
 
-@nb.njit(cache=True)
-def window_stats(z, wy, wx):
-    """(plane-residual RMS, normalised deviation entropy) over a wy x wx window per node.
-
-    Windows are clipped at the edges; NaN nodes are skipped; fewer than 3 valid nodes
-    give NaN.
-    """
-    ny, nx = z.shape
-    rough = np.full((ny, nx), np.nan)
-    ent = np.full((ny, nx), np.nan)
-    hy, hx = wy // 2, wx // 2
-    vals = np.empty(wy * wx)
-    for i in range(ny):
-        for j in range(nx):
-            if z[i, j] != z[i, j]:
-                continue
-            # least squares z = c + a x + b y about the window's own centroid
-            n = 0
-            sx = sy = sz = 0.0
-            for di in range(-hy, hy + 1):
-                for dj in range(-hx, hx + 1):
-                    ii, jj = i + di, j + dj
-                    if 0 <= ii < ny and 0 <= jj < nx and z[ii, jj] == z[ii, jj]:
-                        vals[n] = z[ii, jj]
-                        n += 1
-                        sx += dj
-                        sy += di
-                        sz += z[ii, jj]
-            if n < 3:
-                continue
-            mx, my, mz = sx / n, sy / n, sz / n
-            sxx = syy = sxy = sxz = syz = 0.0
-            k = 0
-            for di in range(-hy, hy + 1):
-                for dj in range(-hx, hx + 1):
-                    ii, jj = i + di, j + dj
-                    if 0 <= ii < ny and 0 <= jj < nx and z[ii, jj] == z[ii, jj]:
-                        x, y, v = dj - mx, di - my, vals[k] - mz
-                        sxx += x * x
-                        syy += y * y
-                        sxy += x * y
-                        sxz += x * v
-                        syz += y * v
-                        k += 1
-            det = sxx * syy - sxy * sxy
-            a = (sxz * syy - syz * sxy) / det if det > 0 else 0.0
-            b = (syz * sxx - sxz * sxy) / det if det > 0 else 0.0
-            res2 = 0.0
-            dev_sum = 0.0
-            k = 0
-            for di in range(-hy, hy + 1):
-                for dj in range(-hx, hx + 1):
-                    ii, jj = i + di, j + dj
-                    if 0 <= ii < ny and 0 <= jj < nx and z[ii, jj] == z[ii, jj]:
-                        v = vals[k] - mz
-                        r = v - a * (dj - mx) - b * (di - my)
-                        res2 += r * r
-                        dev_sum += abs(v)
-                        k += 1
-            rough[i, j] = math.sqrt(res2 / n)
-            if dev_sum <= 0.0:
-                ent[i, j] = 0.0
-                continue
-            h = 0.0
-            for q in range(n):
-                p = abs(vals[q] - mz) / dev_sum
-                if p > 0.0:
-                    h -= p * math.log(p)
-            ent[i, j] = h / math.log(n)
-    return rough, ent
-
-
-def window_stats_numpy(z: np.ndarray, wy: int, wx: int) -> tuple[np.ndarray, np.ndarray]:
-    """Plain-numpy reference of :func:`window_stats` (a loop of least-squares solves)."""
-    ny, nx = z.shape
-    rough = np.full((ny, nx), np.nan)
-    ent = np.full((ny, nx), np.nan)
-    hy, hx = wy // 2, wx // 2
-    for i in range(ny):
-        for j in range(nx):
-            if np.isnan(z[i, j]):
-                continue
-            i0, i1, j0, j1 = max(0, i - hy), min(ny, i + hy + 1), max(0, j - hx), min(nx, j + hx + 1)
-            yy, xx = np.mgrid[i0 - i:i1 - i, j0 - j:j1 - j]
-            w = z[i0:i1, j0:j1]
-            ok = ~np.isnan(w)
-            if ok.sum() < 3:
-                continue
-            v = w[ok]
-            A = np.column_stack([np.ones(v.size), xx[ok], yy[ok]])
-            coef, *_ = np.linalg.lstsq(A, v, rcond=None)
-            rough[i, j] = np.sqrt(np.mean((v - A @ coef) ** 2))
-            dev = np.abs(v - v.mean())
-            if dev.sum() <= 0:
-                ent[i, j] = 0.0
-                continue
-            p = dev / dev.sum()
-            p = p[p > 0]
-            ent[i, j] = -(p * np.log(p)).sum() / np.log(v.size)
-    return rough, ent
-
-
 def suitability(grid: Map, beams_body: np.ndarray, altitude_m: float, range_std_m: float, pings: int,
                 initial_area_m: float, window_m: float = 50.0, sensor: str = "dvl") -> Suitability:
     """Every measure of the module docstring on ``grid``'s nodes."""
@@ -245,8 +153,6 @@ def write_geotiff(values: np.ndarray, grid: Map, path) -> None:
     try:
         import tifffile
     except ImportError:
-        from tanbench.errors import TanbenchError
-
         raise TanbenchError("writing GeoTIFF needs tifffile: pip install 'tanbench[maps]'") from None
     geokeys = [1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 2, 3076, 0, 1, 9001]
     extratags = [
@@ -275,18 +181,11 @@ class Source:
 
 def sources_from(target, altitude_m: float | None = None, noise_m: float | None = None) -> list[Source]:
     """A bathymetry file (the file's grid is the map) or a sweep YAML (each terrain's map and tracks)."""
-    from pathlib import Path
-
-    from tanbench.errors import TanbenchError
-
     target = Path(target)
     if not target.exists():
         raise TanbenchError(f"{target}: no such map or sweep file")
     if target.suffix.lower() in (".yaml", ".yml"):
         return _sweep_sources(target, altitude_m, noise_m)
-    from tanbench.config import FilterSpec, Scenario, TerrainSpec
-    from tanbench.terrain import truth_map
-
     grid = truth_map(TerrainSpec(kind="file", path=str(target)))
     return [Source(label=target.stem, grid=grid, altitude_m=altitude_m or DEFAULT_ALTITUDE_M,
                    noise_m=Scenario().noise_m if noise_m is None else noise_m,
@@ -294,13 +193,6 @@ def sources_from(target, altitude_m: float | None = None, noise_m: float | None 
 
 
 def _sweep_sources(path, altitude_m, noise_m) -> list[Source]:
-    import json
-
-    from tanbench.sweep import load_sweep
-    from tanbench.simulation import motion_plan
-    from tanbench.terrain import navigation_map, truth_map
-    from tanbench.vehicle.trajectory import sample_path
-
     sweep = load_sweep(path)
     out: dict[str, Source] = {}
     seen_worlds: set[tuple[str, str]] = set()
@@ -335,9 +227,6 @@ def _terrain_label(sc) -> str:
 
 def sensor_beams(sensor: str, scenario=None) -> np.ndarray:
     """Body-frame beams of ``dvl`` (the scenario's Janus geometry) or ``sbe``."""
-    from tanbench.config import SensorSpec
-    from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors
-
     s = scenario.sensors if scenario is not None else SensorSpec()
     return dvl_beam_vectors(s.beam_tilt_deg, s.beam_azimuths_deg) if sensor == "dvl" else altimeter_beam_vectors()
 
@@ -355,10 +244,7 @@ def track_summary(result: Suitability, tracks) -> list[dict]:
 def plot_suitability(result: Suitability, tracks, path) -> None:
     """A PNG of the predicted std and the classical measures, with the tracks drawn."""
     import matplotlib
-
-    from tanbench.plot import _pyplot
-
-    plt = _pyplot()
+    plt = pyplot()
     g = result.grid
     extent = (g.e0 - g.res_e / 2, g.e_max + g.res_e / 2, g.n0 - g.res_n / 2, g.n_max + g.res_n / 2)
     panels = [("predicted_std_m", f"predicted position std after {result.pings} pings (m)", "viridis_r"),
