@@ -25,6 +25,7 @@ import math
 import time
 
 import numpy as np
+from tanbench import store
 from tanbench.config import Scenario
 from tanbench.filters import ekf, likelihood as L, mpf, pmf, tercom
 from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
@@ -35,8 +36,13 @@ from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals
 from tanbench.filters.trig import attitude_reference
 from tanbench.methods import get, method_context, run_method
 from tanbench.methods.registry import builtin_names, names
+from tanbench.runner.engine import cell_columns, store_result
+from tanbench.runner.plan import make_plan
+from tanbench.runner.resume import ResumeState
+from tanbench.runner.tasks import execute
 from tanbench.navigation.increments import compute_increments
-from tanbench.simulation import simulate_vehicle
+from tanbench.simulation import noise_free_world, simulate_vehicle
+from tanbench.sweep import parse_sweep
 from tanbench.terrain.grid import gather_cells, node_grid
 from tanbench.terrain.representation import map_variance_grid
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -345,6 +351,92 @@ def calibrated_cost_ns(particles: int = 3000, repeats: int = 2) -> dict[str, flo
     return {m: run_figures(m, particles, repeats)["ns_per_unit_cpu"] for m in builtin_names()}
 
 
+FIXED_COST_METHODS = ("tight-dvl", "tight-sbe", "loose-dvl")  # the CI and quick sweeps' methods
+_START_UP = """
+import sys, time
+c0 = time.process_time()
+{body}
+print(time.process_time() - c0)
+"""
+
+
+def _child_cpu_s(body: str) -> float:
+    """Process CPU seconds of ``body`` run in a fresh Python (imports included)."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-c", _START_UP.format(body=body)], capture_output=True, text=True,
+                          check=True)
+    return float(proc.stdout.strip().splitlines()[-1])
+
+
+def fixed_costs(runs: int = 5) -> dict:
+    """What a sweep costs besides its filters, in thread/process CPU seconds (robust on a loaded machine).
+
+    * ``parent_start_s``: a fresh ``tanbench run`` process importing what it needs;
+    * ``worker_start_s``: a fresh worker process importing tanbench and warming up (loading
+      the cached kernels of) the three particle filters of the CI sweep;
+    * ``world_s``: building one noise-free world (truth, ping indices, ray-cast sonar ranges)
+      of the default scenario, once per world and sweep;
+    * per task (a run of the default scenario, the best of ``runs``): ``simulation_s`` (the
+      run's sensors and navigation solution), ``around_filter_s`` (per method, what
+      ``run_method`` spends besides the filter: inputs, checks, scoring, bound; measured
+      with a 16-particle filter, whose own time is a small part of it), and
+      ``store_s`` (the parent writing the task's rows and series).
+    """
+    import json
+
+
+    out = {"parent_start_s": _child_cpu_s("import tanbench.cli, tanbench.runner.engine, tanbench.results"),
+           "worker_start_s": _child_cpu_s(
+               "from tanbench.runner.executors import single_thread_environment, warm_up\n"
+               f"single_thread_environment(); warm_up(None, {FIXED_COST_METHODS!r})")}
+    scenario = Scenario()
+    world = json.dumps(scenario.world_spec(), sort_keys=True)
+    noise_free_world.cache_clear()
+    c0 = time.thread_time()
+    noise_free_world(world)
+    out["world_s"] = time.thread_time() - c0
+    tiny = scenario.model_copy(update={"particles": 16})  # the filter's own time then is ~1 % of this
+    sim, around = [], []
+    for r in range(runs):
+        c0 = time.thread_time()
+        vehicle = simulate_vehicle(scenario, np.random.SeedSequence([BENCH_SEED, r]))
+        sim.append(time.thread_time() - c0)
+        for method in FIXED_COST_METHODS:
+            c0 = time.thread_time()
+            run_method(tiny, method, vehicle, np.random.SeedSequence(r))
+            around.append(time.thread_time() - c0)
+    out["simulation_s"] = min(sim)
+    out["around_filter_s"] = float(np.median(around))
+    out["store_s"] = _store_cost(runs)
+    return {k: round(v, 4) for k, v in out.items()}
+
+
+def _store_cost(runs: int) -> float:
+    """Thread CPU seconds of the parent storing one finished task (rows and series) of the default
+    scenario (best of ``runs``)."""
+    import tempfile
+    from pathlib import Path
+
+
+    sweep = parse_sweep(f"name: bench\nseed: {BENCH_SEED}\nruns: 1\nmethods: {list(FIXED_COST_METHODS)}\n"
+                        "scenario: {particles: 16}\n")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "bench"
+        plan = make_plan(sweep, out, None, 1)
+        result = execute(plan.tasks[0])
+        state = ResumeState.read(sweep, out)
+        meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
+        columns = cell_columns(sweep)
+        best = []
+        for _ in range(runs):
+            c0 = time.thread_time()
+            store_result(result, plan, state, columns, meta, False)
+            best.append(time.thread_time() - c0)
+    return min(best)
+
+
 def run_bench(particles: int = 3000, repeats: int = 3, methods=None) -> dict:
     """Measure and return every figure as a dict."""
     methods = list(methods or names())
@@ -354,4 +446,4 @@ def run_bench(particles: int = 3000, repeats: int = 3, methods=None) -> dict:
         if method in PARTICLE_FILTERS:
             runs.append(run_figures(method, particles, repeats, "numpy"))
     return {"particles": particles, "updates": 1191, "runs": runs, "steps": reference_steps(particles),
-            "kernels": kernel_breakdown(particles)}
+            "kernels": kernel_breakdown(particles), "fixed": fixed_costs()}

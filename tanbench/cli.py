@@ -196,7 +196,7 @@ def plan(
     from collections import Counter
 
     from tanbench import kernel_cache
-    from tanbench.runner.plan import current_load, default_workers, make_plan
+    from tanbench.runner.plan import builtin_methods, current_load, default_workers, make_plan
     from tanbench.runner.resume import ResumeState
     from tanbench.runner.validate import check_methods
 
@@ -217,7 +217,7 @@ def plan(
     if not todo:
         typer.echo(f"to do: nothing, every task is stored in {out} ({_count(0, n_m)} left)")
         return
-    warm = kernel_cache.is_warm()
+    warm = kernel_cache.is_warm(builtin_methods(sweep.spec.methods))
     parts = p.estimate_parts(warm=warm)
     start = (f"{parts['compile']:.0f} s compiling the numba kernels (cold cache) and starting workers"
              if not warm else f"{parts['compile']:.0f} s starting workers (kernels cached)")
@@ -731,6 +731,13 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
         typer.echo(f"  {method} passes (ns per particle, thread CPU, a mid-run cloud):")
         for name, ns in kernels.items():
             typer.echo(f"    {name:<58} {ns:7.1f}")
+    f = figures["fixed"]
+    typer.echo("  fixed costs of a sweep (CPU seconds; the default scenario, the CI sweep's three methods):")
+    typer.echo(f"    start-up: the parent's imports {f['parent_start_s']:.2f} s; a worker's imports and warm-up "
+               f"(cached kernels) {f['worker_start_s']:.2f} s")
+    typer.echo(f"    per world: its noise-free simulation and sonar ray-casting {f['world_s']:.2f} s")
+    typer.echo(f"    per task: the run's vehicle data {f['simulation_s']:.3f} s, around each method's filter "
+               f"{f['around_filter_s']:.3f} s, storing its rows and series {f['store_s']:.3f} s")
 
 
 def _usage_error_types() -> tuple[type, ...]:

@@ -109,8 +109,35 @@ def use_kernel_cache() -> Path:
     return path
 
 
-def is_warm() -> bool:
+WARM_MARK = "warmed-"  # + a built-in method's name: a file in the cache directory once its kernels are in it
+
+
+def is_warm(methods=None) -> bool:
     """Whether the cache holds the kernels of the main filter module (a sweep then loads them
-    instead of compiling; the rule of ``plan``'s estimate and of ``run``'s compile message)."""
+    instead of compiling; the rule of ``plan``'s estimate and of ``run``'s compile message).
+
+    With ``methods`` (built-in method names): whether it holds the kernels of each, as marked
+    by :func:`mark_warm` once a warm-up compiled them here.
+    """
+    if methods is None:
+        path = cache_dir()
+        return path.is_dir() and any(path.rglob(f"{MAIN_KERNEL_MODULE}.*.nbi"))
+    return not cold_methods(methods)
+
+
+def cold_methods(methods) -> list[str]:
+    """The built-in ``methods`` whose kernels this cache does not hold yet."""
     path = cache_dir()
-    return path.is_dir() and any(path.rglob(f"{MAIN_KERNEL_MODULE}.*.nbi"))
+    return [name for name in methods if not (path / f"{WARM_MARK}{name}").is_file()]
+
+
+def mark_warm(methods) -> None:
+    """Record that the kernels of these built-in ``methods`` are in the cache (after a warm-up
+    ran each one here); a cache that cannot be written is simply not marked."""
+    path = cache_dir()
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        for name in methods:
+            (path / f"{WARM_MARK}{name}").touch()
+    except OSError:
+        pass

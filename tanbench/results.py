@@ -240,8 +240,12 @@ def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
     return out.astype({c: "float32" for c in floats})
 
 
-def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
-    """Write series/summary.parquet (if series are kept) and tables/ for ``sweep``."""
+def build_outputs(out: Path, sweep, series: str, written: dict | None = None) -> dict[str, pd.DataFrame]:
+    """Write series/summary.parquet (if series are kept) and tables/ for ``sweep``.
+
+    ``written``: series tables (Arrow) by file path, as the running session wrote them (those
+    files are not read back; :class:`tanbench.runner.engine.SeriesWritten`)."""
+    written = written or {}
     meta = store.provenance(sweep.text, sweep.name, sweep.spec.seed)
     ids = {c.cell_id for c in sweep.cells}
     if series != "none":
@@ -253,7 +257,8 @@ def build_outputs(out: Path, sweep, series: str) -> dict[str, pd.DataFrame]:
             for f in _files(store.series_dir(out, full), "cell_id=*/run-*.parquet"):
                 if store.cell_of(f) in ids:
                     files[(store.cell_of(f), f.name)] = f
-        frames = [store.read_parquet(f).assign(cell_id=cell) for (cell, _), f in sorted(files.items())]
+        frames = [(written[f].to_pandas() if f in written else store.read_parquet(f)).assign(cell_id=cell)
+                  for (cell, _), f in sorted(files.items())]
         summary_path = out / "series" / "summary.parquet"
         if frames and summary_path.exists():
             kept = store.read_parquet(summary_path)

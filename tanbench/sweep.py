@@ -119,9 +119,15 @@ class Cell:
     tables: list[str] = field(default_factory=list)
     varied: dict[str, Value] = field(default_factory=dict)
 
+    _key: tuple | None = field(default=None, init=False, repr=False, compare=False)
+
     @property
     def cell_id(self) -> str:
-        return self.scenario.cell_key()
+        """The scenario's cell key, hashed once per scenario (a frozen model): plan, run and
+        the tables ask for it several times per cell (3 ms each)."""
+        if self._key is None or self._key[0] is not self.scenario:
+            self._key = (self.scenario, self.scenario.cell_key())
+        return self._key[1]
 
 
 @dataclass

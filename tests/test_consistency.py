@@ -73,3 +73,28 @@ def test_run_summary_after_convergence_only():
     assert s["nees_mean_after_convergence"] == 2.0
     assert s["nees_above_95"] == 0.5
     assert np.isnan(run_summary(t, v, float("nan"))["nees_mean_after_convergence"])
+
+
+def test_one_run_bounds_at_the_defaults_are_scipys_numbers():
+    """The stored default bounds (which spare the workers scipy.stats' import) are scipy's, to the bit."""
+    from scipy import stats
+
+    from tanbench.metrics import consistency
+
+    a = (1 - consistency.LEVEL) / 2
+    assert one_run_bounds() == (float(stats.chi2.ppf(a, consistency.NEES_DOF)),
+                                float(stats.chi2.ppf(1 - a, consistency.NEES_DOF)))
+    b = (1 - 0.9) / 2
+    assert one_run_bounds(3, 0.9) == (float(stats.chi2.ppf(b, 3)), float(stats.chi2.ppf(1 - b, 3)))
+
+
+def test_mc_bounds_are_scipy_stats_numbers():
+    """mc_bounds (scipy.special's inverse incomplete gamma) gives chi2.ppf's values to the bit."""
+    from scipy import stats
+
+    n = np.array([1, 2, 5, 30, 200, 1650, 123456], dtype=float)
+    for level in (0.95, 0.9):
+        a = (1 - level) / 2
+        lo, hi = mc_bounds(n, 2, level)
+        np.testing.assert_array_equal(lo, stats.chi2.ppf(a, 2 * n) / n)
+        np.testing.assert_array_equal(hi, stats.chi2.ppf(1 - a, 2 * n) / n)

@@ -25,7 +25,10 @@ def test_plan_estimate_includes_compilation_and_the_load():
     workers = min(2, len(plan.tasks))
     idle = plan.estimate_parts(load=0.0, warm=False)
     share_one, share_all = min(1.0, cores / 1.0), min(1.0, cores / workers)
-    assert idle["compile"] == pytest.approx(planning.COMPILE_S / share_one + planning.WARM_START_S / share_all)
+    compile_s = planning.compile_seconds(sweep.spec.methods, sweep.spec.methods)
+    assert compile_s == pytest.approx(planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["tight"]
+                                      + planning.COMPILE_FAMILY_S["loose"])  # tight-sbe shares tight-dvl's kernels
+    assert idle["compile"] == pytest.approx(compile_s / share_one + planning.WARM_START_S / share_all)
     assert idle["tasks"] == pytest.approx(tasks / (workers * share_all))
     assert idle["fixed"] == pytest.approx(planning.FIXED_S / share_one)
     warm = plan.estimate_parts(load=0.0, warm=True)
@@ -34,6 +37,26 @@ def test_plan_estimate_includes_compilation_and_the_load():
     assert busy["tasks"] == pytest.approx(tasks / (workers * min(1.0, cores / (8.0 + workers))))
     assert busy["compile"] > idle["compile"] and busy["fixed"] > idle["fixed"]
     assert plan.estimate_seconds() == pytest.approx(sum(plan.estimate_parts().values()), rel=0.5)
+
+
+def test_warm_up_compiles_and_marks_only_the_sweeps_methods(tmp_path, monkeypatch):
+    """A sweep's warm-up runs its own built-in methods only and marks them warm; the plan's compile
+    estimate then drops to nothing for them, and still counts the methods never warmed."""
+    from tanbench.runner import executors
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    ran = []
+    monkeypatch.setattr("tanbench.methods.run_method", lambda scenario, method, vehicle, seed: ran.append(method))
+    monkeypatch.setattr("tanbench.simulation.simulate_vehicle", lambda scenario, seed: None)
+    sweep_methods = ("tight-dvl", "loose-dvl", "my.module:run")
+    assert planning.builtin_methods(sweep_methods) == ["tight-dvl", "loose-dvl"]
+    assert kernel_cache.cold_methods(planning.builtin_methods(sweep_methods)) == ["tight-dvl", "loose-dvl"]
+    executors.warm_up(None, sweep_methods)
+    assert ran == ["tight-dvl", "loose-dvl"]
+    assert kernel_cache.is_warm(["tight-dvl", "loose-dvl"]) and not kernel_cache.is_warm(["tight-dvl", "pmf-dvl"])
+    assert planning.compile_seconds(sweep_methods) == 0.0
+    assert planning.compile_seconds(("tight-dvl", "pmf-dvl")) == pytest.approx(
+        planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["pmf"])
 
 
 def test_kernel_cache_warm_only_with_the_main_kernels_of_these_sources(tmp_path, monkeypatch):

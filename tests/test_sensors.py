@@ -14,7 +14,7 @@ import pytest
 
 from tanbench.config import Scenario, SensorSpec
 from tanbench.sensors.dvl import measure_velocity
-from tanbench.sensors.imu import gauss_markov, measure_imu
+from tanbench.sensors.imu import first_order_recursion, first_order_recursion_numpy, gauss_markov, measure_imu
 from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.raycast import cast_ray, cast_rays, cast_rays_numpy
 from tanbench.sensors.sonar import (
@@ -275,6 +275,13 @@ def test_gauss_markov_in_run_bias():
     np.testing.assert_allclose(lag1, math.exp(-DT / tau), atol=1e-3)
     starts = gauss_markov(2, DT, sigma, 300.0, np.random.default_rng(44), axes=20_000)[0]
     assert starts.std() == pytest.approx(sigma, rel=0.03)  # stationary from the first sample
+
+
+@pytest.mark.parametrize("n, axes, a", [(119_001, 3, math.exp(-0.01 / 300.0)), (5, 2, 0.5), (1, 3, 0.9), (0, 3, 0.9)])
+def test_first_order_recursion_equals_scipy_bit_for_bit(n, axes, a):
+    """The jitted Gauss-Markov recursion gives exactly scipy.signal.lfilter's numbers (stored runs keep their bits)."""
+    w = np.random.default_rng(7).standard_normal((n, axes)) * 1e-4
+    np.testing.assert_array_equal(first_order_recursion(w, a), first_order_recursion_numpy(w, a))
 
 
 def test_imu_in_run_bias_level(table1):

@@ -305,7 +305,7 @@ def test_execute_turns_exceptions_into_error_rows(monkeypatch):
             raise ValueError("boom")
         return real(scenario, method, vehicle, seed)
 
-    monkeypatch.setattr(run_module, "run_method", failing)
+    monkeypatch.setattr("tanbench.runner.tasks.run_method", failing)  # imported at the top there
     result = execute(task)
     status = {r["method"]: (r["status"], r["error"]) for r in result.rows}
     assert status["tight-dvl"] == ("ok", "") and status["tight-sbe"] == ("ok", "")

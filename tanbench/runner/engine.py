@@ -23,16 +23,19 @@ import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
+import pyarrow as pa
 from tqdm import tqdm
 
 from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
 from tanbench.errors import describe_exception
 from tanbench.runner.executors import open_executor, warm_up
-from tanbench.runner.plan import Plan, check_series_mode, make_plan
+from tanbench.runner.plan import Plan, builtin_methods, check_series_mode, compile_seconds, cpu_share_now, make_plan
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.runner.validate import check_output, validate_sweep
@@ -83,11 +86,37 @@ def _other_code_rows(result: TaskResult, expected: dict[str, str]) -> TaskResult
                       {m: c for m, c in result.code.items() if m not in wrong})
 
 
+@lru_cache(maxsize=1)
+def _string_type() -> pa.DataType:
+    """The Arrow type pandas' conversion gives a column of Python strings (large_string in
+    newer pandas, string before)."""
+    return pa.Table.from_pandas(pd.DataFrame({"s": ["x"]}), preserve_index=False).schema.field("s").type
+
+
+def series_table(result: TaskResult) -> pa.Table:
+    """A task's series as one Arrow table: columns run, method, then the series, the methods'
+    rows one after the other. The table ``pa.Table.from_pandas`` makes of the frames
+    ``{"run", "method", **series}`` concatenated (NaN stored as null as pandas' conversion
+    does, the same types), without building them: the file written is the same."""
+    items = list(result.series.items())
+    keys = list(items[0][1])
+    if any(list(s) != keys for _, s in items[1:]):  # methods with other series: pandas aligns them
+        frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in items]
+        return pa.Table.from_pandas(pd.concat(frames, ignore_index=True), preserve_index=False)
+    lengths = [len(next(iter(s.values()))) if s else 0 for _, s in items]
+    columns = {"run": pa.array(np.full(sum(lengths), result.run, dtype=np.int64)),
+               "method": pa.array(np.repeat(np.array([m for m, _ in items], dtype=object), lengths),
+                                 _string_type())}
+    for key in keys:
+        columns[key] = pa.array(np.concatenate([np.asarray(s[key]) for _, s in items]), from_pandas=True)
+    return pa.table(columns)
+
+
 def store_result(result: TaskResult, plan: Plan, state: ResumeState, columns: dict, meta: dict,
-                 full_series: bool) -> TaskResult:
+                 full_series: bool, written: SeriesWritten | None = None) -> TaskResult:
     """Write a finished task's rows (and series) atomically, with what identifies them in the
     file's metadata: a file terrain's content hash and the user methods' code. Returns the
-    result as stored."""
+    result as stored; ``written`` keeps the series frame as written (for the summary)."""
     result = _other_code_rows(result, state.codes)
     out = plan.out
     if result.cell_id in state.terrain:
@@ -95,15 +124,37 @@ def store_result(result: TaskResult, plan: Plan, state: ResumeState, columns: di
     if result.code:
         meta = {**meta, store.CODE_META: result.code}
     if result.series:
-        frames = [pd.DataFrame({"run": result.run, "method": m, **s}) for m, s in result.series.items()]
-        store.write_parquet(pd.concat(frames, ignore_index=True),
-                            store.series_file(out, result.cell_id, result.run, full_series), meta)
+        table = series_table(result)
+        path = store.series_file(out, result.cell_id, result.run, full_series)
+        store.write_table(table, path, meta)
+        if written is not None:
+            written.keep(path, table)
     # a recomputed run leaves no older series of itself under the other --series mode
     store.series_file(out, result.cell_id, result.run, not full_series).unlink(missing_ok=True)
     rows = [{"sweep": plan.sweep.name, **columns[result.cell_id],
              **{k: v for k, v in row.items() if k != "cell_id"}} for row in result.rows]
     store.write_table(rows_table(rows), store.run_file(out, result.cell_id, result.run), meta)
     return result
+
+
+SERIES_KEPT_MAX_BYTES = 256 * 2**20  # series frames a session keeps in memory for the summary
+
+
+class SeriesWritten:
+    """The series tables this session wrote, by file, so that the series summary is built
+    from memory instead of reading every file back (:func:`tanbench.results.build_outputs`
+    reads only the others: stored by earlier sessions, or past :data:`SERIES_KEPT_MAX_BYTES`).
+    A table is what its file holds: it converts to pandas as the file read back does."""
+
+    def __init__(self, max_bytes: int = SERIES_KEPT_MAX_BYTES):
+        self.tables: dict[Path, pa.Table] = {}
+        self.room = max_bytes
+
+    def keep(self, path: Path, table: pa.Table) -> None:
+        self.tables.pop(path, None)
+        if table.nbytes <= self.room:
+            self.tables[path] = table
+            self.room -= table.nbytes
 
 
 def _to_stderr(line: str) -> None:
@@ -136,14 +187,15 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     if not todo:  # with tasks to run, sweep.yaml is written once the executor is up (a scheduler that
         store.write_text(sweep.text, out / "sweep.yaml")  # does not answer changes nothing stored)
     report = RunReport(skipped=len(plan.tasks) - len(todo))
+    written = SeriesWritten()
     started = time.perf_counter()
     if todo:
-        _execute(plan, state, todo, scheduler, meta, series == "full", progress, report, note)
+        _execute(plan, state, todo, scheduler, meta, series == "full", progress, report, note, written)
     report.wall_s = time.perf_counter() - started
     log_session(out, report, plan, scheduler)
     if not report.interrupted:
         store.compact_cells(out, [c.cell_id for c in sweep.cells])
-        report.tables = build_outputs(out, sweep, series)
+        report.tables = build_outputs(out, sweep, series, written.tables)
     return report
 
 
@@ -175,23 +227,25 @@ def shared_inputs(sweep: Sweep) -> tuple[dict, dict]:
 
 
 def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note) -> None:
-    """Compile every kernel here, into numba's on-disk cache, unless it holds them
+    """Compile the kernels of the sweep's methods here, into numba's on-disk cache, unless it holds them
     (:func:`tanbench.kernel_cache.is_warm`, the rule of ``plan``'s estimate too), so that
     the workers only load them (a progress bar at 0 % for a minute would look like a hang)."""
-    if kernel_cache.is_warm():
+    methods = plan.sweep.spec.methods
+    if kernel_cache.is_warm(builtin_methods(methods)):
         return
-    guess = plan.estimate_parts(todo, warm=False)["compile"]
+    # the cold methods' measured compile time over the share of a core this process gets now
+    guess = compile_seconds(methods) / cpu_share_now()
     if progress:
         note(f"compiling the numba kernels (once per install or kernel code change; about {guess:.0f} s on this "
              f"machine now)...")
     started = time.perf_counter()
-    warm_up(todo[0].scenario_json)
+    warm_up(todo[0].scenario_json, methods)
     if progress:
         note(f"compiled in {time.perf_counter() - started:.0f} s; starting the workers")
 
 
 def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, full_series, progress,
-             report: RunReport, note) -> None:
+             report: RunReport, note, written: SeriesWritten | None = None) -> None:
     """Run ``todo`` on the executor, storing each finished task; tasks a dead worker took with it
     run again in a new pool (at most :data:`MAX_POOL_STARTS` pools), else are left to a rerun."""
     columns = cell_columns(plan.sweep)
@@ -210,7 +264,8 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
         for start in range(1, MAX_POOL_STARTS + 1):
             # the executor first: if it cannot start (a Dask address that does not answer), the
             # user sees its one error line and no half-drawn progress bar
-            with open_executor(workers, scheduler, truth_maps, worlds, remaining[0].scenario_json) as handle:
+            with open_executor(workers, scheduler, truth_maps, worlds, remaining[0].scenario_json,
+                               tuple(plan.sweep.spec.methods)) as handle:
                 store.write_text(plan.sweep.text, plan.out / "sweep.yaml")
                 if bar is None:
                     bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
@@ -227,7 +282,7 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
                                 lost.append(task)
                                 reason = reason or describe_exception(failure)
                                 continue
-                            result = store_result(fut.result(), plan, state, columns, meta, full_series)
+                            result = store_result(fut.result(), plan, state, columns, meta, full_series, written)
                             failed = [r for r in result.rows if r["status"] != "ok"]
                             report.failed_rows += len(failed)
                             report.errors += [f"{r['cell_id']} run {r['run']} {r['method']}: {r['error']}"

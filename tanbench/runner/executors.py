@@ -54,27 +54,34 @@ def single_thread_environment() -> None:
     os.environ.update(SINGLE_THREAD_ENV)
 
 
-def warm_up(scenario_json: str | None = None) -> None:
-    """Compile (or load from cache) every jitted kernel with a tiny run of each method.
+def warm_up(scenario_json: str | None = None, methods=None) -> None:
+    """Compile (or load from cache) the jitted kernels of ``methods`` with a tiny run of each.
 
-    ``scenario_json`` (a cell of the sweep) sets the terrain and filter options of the
-    tiny run, so a worker warms up the kernels the sweep uses (e.g. the ``FastRng``
-    specialisations) on a map it has been given, instead of synthesising the default one.
+    ``methods``: the sweep's method names (default: every built-in); only built-in methods
+    are warmed (a user method's code runs only in its tasks). ``scenario_json`` (a cell of
+    the sweep) sets the terrain and filter options of the tiny run, so a worker warms up
+    the kernels the sweep uses (e.g. the ``FastRng`` specialisations) on a map it has been
+    given, instead of synthesising the default one. A sweep of three particle filters thus
+    never compiles nor loads the point-mass, marginalized, EKF and TERCOM kernels.
     """
     import json
 
     import numpy as np
 
+    from tanbench import kernel_cache
     from tanbench.config import Scenario
     from tanbench.methods import run_method
     from tanbench.methods.registry import builtin_names
     from tanbench.simulation import simulate_vehicle
 
+    builtin = builtin_names()
+    names = builtin if methods is None else tuple(m for m in methods if m in builtin)
     spec = json.loads(scenario_json) if scenario_json else {}
     scenario = Scenario(**{**spec, "duration_s": 3.0, "particles": 16})
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(0))
-    for method in builtin_names():
+    for method in names:
         run_method(scenario, method, vehicle, np.random.SeedSequence(1))
+    kernel_cache.mark_warm(names)
 
 
 def install_worker_maps(maps: dict) -> None:
@@ -110,7 +117,7 @@ def die_with_parent(parent_pid: int) -> None:
 
 
 def _local_worker_init(parent_pid: int, maps_pickle: bytes, worlds_pickle: bytes = b"",
-                       scenario_json: str | None = None) -> None:
+                       scenario_json: str | None = None, methods=None) -> None:
     die_with_parent(parent_pid)
     for name in ("SIGINT", "SIGHUP"):  # the parent handles Ctrl-C and a closed terminal, and stops us
         if hasattr(signal, name):
@@ -123,13 +130,13 @@ def _local_worker_init(parent_pid: int, maps_pickle: bytes, worlds_pickle: bytes
 
         preload_worlds(pickle.loads(worlds_pickle))
     try:
-        warm_up(scenario_json)
+        warm_up(scenario_json, methods)
     except Exception:  # noqa: BLE001 - a cell that cannot run reports itself in its task
-        warm_up()
+        warm_up(None, methods)
 
 
-def _dask_worker_init() -> None:
-    warm_up()
+def _dask_worker_init(methods=None) -> None:
+    warm_up(None, methods)
 
 
 class ExecutorHandle:
@@ -146,19 +153,20 @@ class ExecutorHandle:
 
 @contextmanager
 def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None = None,
-                  worlds: dict | None = None, scenario_json: str | None = None):
+                  worlds: dict | None = None, scenario_json: str | None = None, methods=None):
     """Yield an :class:`ExecutorHandle` for ``workers`` local processes or a Dask scheduler.
 
     ``truth_maps`` (from :func:`tanbench.terrain.sweep_truth_maps`) are installed on every
     worker before it runs a task; local workers also get ``worlds`` (noise-free worlds by
-    world JSON, :func:`tanbench.simulation.preload_worlds`) and warm up on ``scenario_json``.
+    world JSON, :func:`tanbench.simulation.preload_worlds`) and warm up on ``scenario_json``;
+    every worker warms up the kernels of ``methods`` only (default: every built-in method).
     """
     maps_pickle = pickle.dumps(truth_maps or {}, protocol=pickle.HIGHEST_PROTOCOL)
     if scheduler is None:
         worlds_pickle = pickle.dumps(worlds, protocol=pickle.HIGHEST_PROTOCOL) if worlds else b""
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_local_worker_init,
-                                   initargs=(os.getpid(), maps_pickle, worlds_pickle, scenario_json))
+                                   initargs=(os.getpid(), maps_pickle, worlds_pickle, scenario_json, methods))
 
         def stop_now():
             processes = list((getattr(pool, "_processes", None) or {}).values())
@@ -188,7 +196,7 @@ def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None =
         try:
             if truth_maps:
                 client.register_plugin(TruthMapsPlugin(maps_pickle), name=plugin_name)
-            client.run(_dask_worker_init)
+            client.run(_dask_worker_init, methods)
         except Exception as exc:  # noqa: BLE001 - a worker that cannot start is a user-facing problem
             raise TanbenchError(f"Dask workers at {scheduler} could not start tanbench: {exc}") from None
         executor = client.get_executor(pure=False)

@@ -9,12 +9,13 @@ from __future__ import annotations
 import heapq
 import json
 import os
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from tanbench import kernel_cache
 from tanbench.errors import TanbenchError
-from tanbench.methods.registry import get
+from tanbench.methods.registry import builtin_names, get
 from tanbench.runner.tasks import Task
 from tanbench.sweep import Sweep
 
@@ -24,7 +25,16 @@ SERIES_MODES = ("none", "summary", "full")
 # them by the share of a core each process gets at the current load average.
 # (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
 SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
-COMPILE_S = 127.0  # numba compiling every kernel (cold on-disk cache), one idle core of the 2-core dev machine (2 Dec 2026)
+# numba compiling a sweep's kernels on a cold on-disk cache: thread CPU seconds, measured one method
+# after another in this order on the 2-core dev machine (2 Dec 2026, the kernels after issue 26's
+# wiring; docs/speed.md "Compiling"):
+# the run's simulation (strapdown navigation, IMU errors), then each method family's kernels (a
+# family: the methods named FAMILY-sensor, which run the same kernels with the same types; the
+# first, tight, includes the random numbers and resampling the later ones reuse). A sweep compiles
+# only the families it names.
+COMPILE_SHARED_S = 4.9
+COMPILE_FAMILY_S = {"tight": 36.0, "loose": 19.9, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
+COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
 WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
 FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
 LARGE_SWEEP_CELLS = 2000  # `plan`, `validate` and `run` warn past this many cells
@@ -42,6 +52,22 @@ def cell_costs(sweep: Sweep) -> dict[str, float]:
     """Estimated single-core seconds of one task (simulation + every method) of each cell."""
     records = [get(m) for m in sweep.spec.methods]
     return {c.cell_id: SIMULATION_S + sum(r.estimate_seconds(c.scenario) for r in records) for c in sweep.cells}
+
+
+def builtin_methods(methods) -> list[str]:
+    """The built-in methods among ``methods`` (the ones with kernels to compile and warm up)."""
+    builtin = builtin_names()
+    return [m for m in methods if m in builtin]
+
+
+def compile_seconds(methods, cold=None) -> float:
+    """Single-core seconds numba takes to compile the kernels of ``methods`` (the cold built-in
+    ones, :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle."""
+    cold = kernel_cache.cold_methods(builtin_methods(methods)) if cold is None else builtin_methods(cold)
+    if not cold:
+        return 0.0
+    families = {m.rsplit("-", 1)[0] for m in cold}
+    return COMPILE_SHARED_S + sum(COMPILE_FAMILY_S.get(f, COMPILE_OTHER_FAMILY_S) for f in families)
 
 
 def size_warning(sweep: Sweep) -> str | None:
@@ -79,18 +105,20 @@ class Plan:
         """The estimate in parts: ``compile`` (or loading the cached kernels), ``tasks`` and ``fixed``.
 
         ``load`` is the machine's load average before the sweep starts (default: now) and
-        ``warm`` whether numba's on-disk cache holds the kernels (default: looked up).
+        ``warm`` whether numba's on-disk cache holds the kernels of the sweep's methods
+        (default: looked up per method; False: none of them, True: all).
         """
         tasks = self.todo if tasks is None else tasks
         if not tasks:
             return {"compile": 0.0, "tasks": 0.0, "fixed": 0.0}
         load = current_load() if load is None else load
-        warm = kernel_cache.is_warm() if warm is None else warm
+        methods = self.sweep.spec.methods
+        compile_s = compile_seconds(methods, None if warm is None else [] if warm else methods)
         workers = max(1, min(self.workers, len(tasks)))
         cores = default_workers()
         share_one = min(1.0, cores / (load + 1))  # the parent alone (compiling)
         share_all = min(1.0, cores / (load + workers))  # every worker busy
-        start = (0.0 if warm else COMPILE_S / share_one) + WARM_START_S / share_all
+        start = compile_s / share_one + WARM_START_S / share_all
         return {"compile": start,
                 "tasks": longest_first_makespan([self.task_cost(t) for t in tasks], workers) / share_all,
                 "fixed": FIXED_S / share_one}
@@ -128,6 +156,16 @@ def longest_first_makespan(costs, workers: int) -> float:
     for cost in sorted(costs, reverse=True):
         heapq.heappush(loads, heapq.heappop(loads) + cost)
     return max(loads) if costs else 0.0
+
+
+def cpu_share_now(probe_s: float = 0.25) -> float:
+    """The share of a core this process gets now, measured: thread CPU over wall time of a short
+    busy loop. Unlike the load average, it sees that niced jobs yield (on 2 December 2026 at a
+    load average of 19.5, mostly niced jobs, the compile step got far more than 2 / 20.5 of a core)."""
+    c0, w0 = time.thread_time(), time.perf_counter()
+    while time.perf_counter() - w0 < probe_s:
+        pass
+    return max(0.02, min(1.0, (time.thread_time() - c0) / (time.perf_counter() - w0)))
 
 
 def current_load() -> float:
