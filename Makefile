@@ -4,9 +4,9 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
-PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy)
+PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d)))
 
-.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism multibeam check-numpy scaling clean
+.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism multibeam criterion seafloors literal-family check-numpy scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -58,6 +58,25 @@ paper-literal: $(VENV)/.installed-run
 	$(TB) tables results/zhou2017-literal --compare-paper > results/zhou2017-literal/tables.md
 	$(TB) report results/zhou2017-literal --discussion none
 	$(TB) run configs/zhou2017-literal-seed2.yaml --out results/zhou2017-literal-seed2 --quiet
+	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
+
+## criterion: the reproduction criterion's pass probabilities under a faithful copy of the paper, simulated from
+## the paper's numbers alone (docs/model.md section 11) into results/criterion/CRITERION.md and faithful.csv
+criterion: $(VENV)/.installed-run
+	$(TB) criterion --out results/criterion/CRITERION.md
+
+## seafloors: the literal and recommended profiles on 5 more synthetic seafloors (configs/seafloors/, docs/model.md
+## section 11.1; 20 runs per cell, no series) into results/seafloors/<name>. Resumes like paper-literal.
+SEAFLOORS := $(sort $(wildcard configs/seafloors/*.yaml))
+seafloors: $(VENV)/.installed-run
+	for f in $(SEAFLOORS); do $(TB) run $$f --out results/seafloors/$$(basename $$f .yaml) --series none --quiet || exit 1; done
+	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
+
+## literal-family: the literal profile with one other reading of the text at a time (docs/model.md section 11.2)
+## into results/zhou2017-literal-family and results/zhou2017-literal-family-loose (20 runs, no series). Resumes.
+literal-family: $(VENV)/.installed-run
+	$(TB) run configs/zhou2017-literal-family-loose.yaml --out results/zhou2017-literal-family-loose --series none --quiet
+	$(TB) run configs/zhou2017-literal-family.yaml --out results/zhou2017-literal-family --series none --quiet
 	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
 
 ## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy

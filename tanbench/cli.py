@@ -308,6 +308,27 @@ def tables(
         typer.echo(to_markdown(table if compare_paper else _compact(table), title=name))
 
 
+@app.command(help="The reproduction criterion (docs/model.md section 11): pass probabilities of a faithful copy "
+                  "of Zhou et al. 2017, simulated from the paper's numbers, as Markdown."
+             + EXAMPLE.format("tanbench criterion --out results/criterion/CRITERION.md"))
+def criterion(
+    out: Optional[Path] = typer.Option(None, "--out", help="Write the Markdown here (default: print it)."),
+    reps: int = typer.Option(2000, "--reps", min=100, help="Simulated copies per scenario."),
+):
+    from tanbench import store
+    from tanbench.report import faithful_markdown
+
+    text, table = faithful_markdown(reps=reps)
+    if out is None:
+        typer.echo(text, nl=False)
+        return
+    out.parent.mkdir(parents=True, exist_ok=True)
+    store.write_text(text, out)
+    csv = out.with_name("faithful.csv")
+    store.write_text(table.to_csv(index=False, float_format="%.4f"), csv)
+    typer.echo(f"wrote {out} and {csv}")
+
+
 @app.command(help="Simulate one run (truth, sensors, navigation system) and write it as Parquet or CSV, or as a "
              "mission log that `tanbench replay` reads (docs/missions.md)."
              + EXAMPLE.format("tanbench simulate --area A --seed 1 --out run.parquet"))
@@ -673,13 +694,21 @@ def report(
     other_seafloor: Optional[Path] = typer.Option(
         None, "--other-seafloor", help="Results of configs/zhou2017-literal-seed2.yaml (the literal profile on "
                                        "another seafloor: its fixed check)."),
+    seafloors: Optional[Path] = typer.Option(
+        None, "--seafloors", help="Directory of the many-seafloor sweeps (results/seafloors, make seafloors)."),
+    family: Optional[list[Path]] = typer.Option(
+        None, "--family", help="Results of the literal family (make literal-family); repeatable."),
 ):
     from tanbench.report import write_report
 
-    for label, d in (("--literal", literal), ("--anatomy", anatomy), ("--other-seafloor", other_seafloor)):
+    for label, d in (("--literal", literal), ("--anatomy", anatomy), ("--other-seafloor", other_seafloor),
+                     *(("--family", f) for f in family or [])):
         if d is not None and not (d / "sweep.yaml").exists():
             raise TanbenchError(f"{label} {d}: not a tanbench results directory (no sweep.yaml)")
-    path = write_report(directory, discussion, literal=literal, anatomy=anatomy, other_seafloor=other_seafloor)
+    if seafloors is not None and not seafloors.is_dir():
+        raise TanbenchError(f"--seafloors {seafloors}: not a directory")
+    path = write_report(directory, discussion, literal=literal, anatomy=anatomy, other_seafloor=other_seafloor,
+                        seafloors=seafloors, family=family or None)
     typer.echo(f"wrote {path}")
 
 

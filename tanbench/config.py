@@ -31,8 +31,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
-                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, MULTIBEAM_PATTERN, PROPAGATION, RECOVERY, REGULARISATION,
-                              REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
+                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, MULTIBEAM_PATTERN, POSITION_NOISE_GROWTH, PROPAGATION,
+                              RECOVERY, REGULARISATION, REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
@@ -350,12 +350,16 @@ class FilterSpec(_Strict):
                                "std initial_area_m (Table 2's 150 m read as a standard deviation)")
     propagation: choices(PROPAGATION) = new_option(
         "exact", description="exact 100 Hz increments, or Eq. 1 as one Euler step over the sampling time with the "
-                             "DVL velocity and body turn rates averaged over the last second / at the update sample")
+                             "DVL velocity and body turn rates averaged over the last second / at the update sample / "
+                             "at the interval's start")
     initial_std_up_m: float = Field(0.1, ge=0)
     initial_std_pitch_roll_deg: float = Field(0.1, ge=0)
     initial_std_heading_deg: float = Field(30.0, ge=0)
     initial_std_gyro_bias_deg_h: float = Field(25.0, ge=0)
     process_noise_velocity_mps: float = Field(0.1, ge=0)
+    position_noise_growth: choices(POSITION_NOISE_GROWTH) = new_option(
+        "linear", description="the tight and loose particle filters' east/north process noise per update: "
+                              "process_noise_velocity_mps * T, or * sqrt(T) (a random walk in position)")
     process_noise_up_m: float = Field(0.01, ge=0)
     process_noise_attitude_deg_sqrt_h: float = Field(2.0, ge=0)
     measurement_noise_distance_m: float = Field(0.1, gt=0)
@@ -576,8 +580,14 @@ class Scenario(_Strict):
         combined with the distance noise, by default ``filter.measurement_noise_distance_m``)."""
         f = self.filter
         r = f.measurement_noise_distance_m if distance_sigma_m is None else distance_sigma_m
-        return position_noise(f.process_noise_velocity_mps * self.sampling_time_s, r,
-                              DISTANCE_INNOVATION[f.distance_innovation])
+        return position_noise(self.position_step_m, r, DISTANCE_INNOVATION[f.distance_innovation])
+
+    @property
+    def position_step_m(self) -> float:
+        """Table 2's east/north process noise over one filter update: ``process_noise_velocity_mps`` times the
+        sampling time (``filter.position_noise_growth: linear``) or its square root (``sqrt``)."""
+        f, T = self.filter, self.sampling_time_s
+        return f.process_noise_velocity_mps * (math.sqrt(T) if f.position_noise_growth == "sqrt" else T)
 
     @property
     def attitude_noise_rad(self) -> float:

@@ -28,7 +28,8 @@ def choices(values):
     """A ``Literal`` of a table's names (a dict's keys or a tuple), in table order."""
     return Literal[tuple(values)]
 # the paper-as-written readings (docs/model.md section 10); kernels test PROPAGATION != exact for the Euler step
-PROPAGATION = {"exact": 0, "euler-last-second": 1, "euler-last-sample": 2}
+PROPAGATION = {"exact": 0, "euler-last-second": 1, "euler-last-sample": 2, "euler-interval-start": 3}
+POSITION_NOISE_GROWTH = ("linear", "sqrt")
 LIKELIHOOD_R = ("per-component", "scalar-norm", "scalar-determinant")
 INITIAL_CLOUD = ("uniform", "gaussian")
 COLLAPSE_REINIT = ("respread", "initial")

@@ -2,10 +2,11 @@
 
 * ``recommended``: tanbench's defaults, the working, documented implementation
   (docs/model.md sections 1-7); it sets nothing.
-* ``zhou2017-literal``: Zhou et al. 2017 as written, each setting derived from the text
-  alone (docs/model.md, section 10, gives the sentence or equation behind every one and
-  the other readings, which are ablations). No setting was chosen by fitting the
-  paper's tables.
+* ``zhou2017-literal``: Zhou et al. 2017 as written, each setting fixed before any
+  literal result was seen, none by fitting the paper's tables; most from the text alone,
+  three partly from the paper's results (distance innovation, collapse re-initialisation,
+  loose architecture: docs/model.md section 10, which gives the sentence, equation or
+  figure behind every one and the other readings, which are ablations).
 
 A profile is applied under the sweep's ``scenario`` (which may override it), and the
 sweep's table designs apply on top of both, so a table can switch one setting of a

@@ -254,3 +254,34 @@ def test_validate_shows_what_the_literal_profile_sets():
     assert "profile zhou2017-literal sets:" in proc.stdout
     for key, (value, _) in PROFILES["zhou2017-literal"].items():
         assert f"{key} = {value!r}" in proc.stdout
+
+
+def test_literal_family_options_neutral_and_acting():
+    """Issue 23's readings: at their neutral values no key moves; otherwise they change the cell, not the world."""
+    base = Scenario()
+    same = Scenario(filter={"position_noise_growth": "linear"})
+    assert same.cell_key() == base.cell_key() and "position_noise_growth" not in base.identity()["filter"]
+    for f in ({"position_noise_growth": "sqrt"}, {"propagation": "euler-interval-start"}):
+        s = Scenario(filter=f)
+        assert s.cell_key() != base.cell_key() and s.world_key() == base.world_key()
+
+
+def test_position_step_grows_with_t_or_its_root():
+    lin, root = (Scenario(sampling_time_s=10.0, filter={"position_noise_growth": g}) for g in ("linear", "sqrt"))
+    assert lin.position_step_m == pytest.approx(1.0)
+    assert root.position_step_m == pytest.approx(0.1 * math.sqrt(10.0))
+    one = [Scenario(filter={"position_noise_growth": g}).position_step_m for g in ("linear", "sqrt")]
+    assert one[0] == one[1]
+
+
+def test_euler_inputs_at_the_interval_start(run_inputs):
+    """euler-interval-start: interval m's inputs are the one sample at its start (update m)."""
+    v, upd = run_inputs
+    nav = v.nav
+    start = np.concatenate([upd[:1], upd[:-1] + 1])
+    u = compute_euler_inputs(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0), start, 1)
+    ref = euler_inputs_numpy(v.gyro, v.dvl_velocity, nav.pitch, nav.roll, nav.yaw, math.radians(30.0), upd, 1)
+    np.testing.assert_allclose(u[:, incmod.EU_VX], v.dvl_velocity[upd[:-1], 0], rtol=1e-12)
+    # the start sample of interval m is the update sample of interval m-1's end: shifted by one interval
+    np.testing.assert_allclose(u[1:, incmod.EU_VY], v.dvl_velocity[upd[1:-1], 1], rtol=1e-12)
+    assert u.shape == ref.shape

@@ -123,7 +123,7 @@ def model_for(scenario, states: str, sensor: str = "dvl") -> BoundModel:
         sig_pos = scenario.position_noise_m()
         cross = 0.0
     else:
-        sig_pos = f.process_noise_velocity_mps * scenario.sampling_time_s
+        sig_pos = scenario.position_step_m
         cross = f.initial_std_heading_rad if f.loose_heading_noise else 0.0
     return BoundModel(
         states=states, initial_area_m=f.initial_area_m,

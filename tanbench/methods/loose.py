@@ -41,7 +41,7 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     ranges = obs.dvl_ranges[ctx.updates.rows]
     c = dcm_body_to_nav_numpy(nav.pitch[upd], nav.roll[upd], nav.yaw[upd])  # (K, 3, 3)
     offsets = np.ascontiguousarray(np.einsum("kij,bj->kbi", c, obs.dvl_beams) * ranges[:, :, None])
-    model = LooseModel(f.process_noise_velocity_mps * T,
+    model = LooseModel(sc.position_step_m,
                        f.initial_std_heading_rad if f.loose_heading_noise else 0.0,
                        f.measurement_sigmas_m[1], f.outside_map_sigma, f.loose_converged_std_m)
     rng = loop_rng(ctx.rng, f.random_numbers)
@@ -77,7 +77,7 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     p_kf[EB, EB] = f.initial_std_gyro_bias_rad_s ** 2
     # the random walk that keeps a first-order Gauss-Markov bias's steady-state std (data sheet values)
     q_bias = s.gyro_bias_instability_deg_h * DEG_PER_H * math.sqrt(2.0 * T / s.gyro_bias_corr_time_s)
-    kf = LooseKalman(f.process_noise_velocity_mps * T, s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
+    kf = LooseKalman(sc.position_step_m, s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
                      q_bias, max(1, int(round(f.loose_fix_interval_s / T))), f.loose_fix_gate, f.loose_fix_floor_m,
                      f.loose_fix_max_std_m, f.loose_fix_misses)
     out_en[0] = nav.pos[upd[0], :2]

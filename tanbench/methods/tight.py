@@ -25,8 +25,9 @@ TIGHT_STATES = ("east", "north", "up", "pitch", "roll", "heading", "gyro_bias_x"
 TIGHT_SERIES = ("var_pitch", "var_roll", "var_bias_x", "var_bias_z", "bias_x_deg_h", "bias_z_deg_h", "healthy")
 
 
-# the Euler inputs' averaging window per propagation reading, seconds (0: the one IMU sample at the update)
-EULER_WINDOW_S = {"euler-last-second": 1.0, "euler-last-sample": 0.0}
+# the Euler inputs' averaging window per propagation reading, seconds (0: the one IMU sample at the update;
+# euler-interval-start: the one sample at the interval's start)
+EULER_WINDOW_S = {"euler-last-second": 1.0, "euler-last-sample": 0.0, "euler-interval-start": 0.0}
 
 
 def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
@@ -35,6 +36,9 @@ def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
     if f.propagation == "exact":
         return np.zeros((max(upd.size - 1, 0), N_EULER))
     window = max(1, int(round(EULER_WINDOW_S[f.propagation] / obs.dt)))
+    if f.propagation == "euler-interval-start":
+        # interval m runs from upd[m] to upd[m+1]; its inputs are the one sample at upd[m]
+        upd = np.concatenate([upd[:1], upd[:-1] + 1])
     return compute_euler_inputs(obs.gyro, obs.dvl_velocity, nav.pitch, nav.roll, nav.yaw, obs.latitude_rad,
                                 upd, window)
 
