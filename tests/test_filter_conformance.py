@@ -79,6 +79,12 @@ def plane_world(monkeypatch):
     sim_mod.noise_free_world.cache_clear()
     monkeypatch.setattr(sim_mod, "truth_map", fake_truth)
     monkeypatch.setattr(run_mod, "navigation_map", fake_nav)
+    # the modules that imported it at their top (methods hand it to the filters, the bound)
+    import tanbench.bounds.pcrb as pcrb_mod
+    import tanbench.methods as methods_mod
+
+    monkeypatch.setattr(methods_mod, "navigation_map", fake_nav)
+    monkeypatch.setattr(pcrb_mod, "navigation_map", fake_nav)
     yield height
     monkeypatch.undo()
     sim_mod.noise_free_world.cache_clear()
