@@ -227,3 +227,16 @@ def test_gates_need_heading_offsets():
 
     with pytest.raises(ValidationError, match="need filter.loose_heading_offsets"):
         Scenario(filter={"loose_heading_offsets": False})
+
+
+def test_regularisation_none_switches_the_posterior_kernel_off_too():
+    """``filter.regularisation: none`` means no jitter for the tight filters as well, whichever
+    kernel ``filter.tight_regularisation`` chooses (it used to be silently replaced by the
+    posterior kernel)."""
+    from tanbench.filters.resample import REG_NONE
+    from tanbench.filters.tight import tight_resampling_of
+
+    on = Scenario().filter
+    off = on.model_copy(update={"regularisation": "none"})
+    assert tight_resampling_of(on).kind == posterior.REG_POSTERIOR
+    assert tight_resampling_of(off).kind == REG_NONE

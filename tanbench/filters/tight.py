@@ -142,9 +142,10 @@ def tight_prior_of(f) -> TightPrior:
 
 def tight_resampling_of(f) -> Resampling:
     """The tight filters' Resampling bundle: the shared one, or the posterior-sized kernel
-    (``filter.tight_regularisation``, filters/posterior.py; on the rows of ``filter.regularised_states``)."""
+    (``filter.tight_regularisation``, filters/posterior.py; on the rows of ``filter.regularised_states``).
+    ``filter.regularisation: none`` switches the jitter off whichever kernel is chosen."""
     rs = collapse_resampling_of(f, REGULARISED_STATES[f.regularised_states])
-    if f.tight_regularisation == "posterior":
+    if f.tight_regularisation == "posterior" and f.regularisation != "none":
         rs = rs._replace(kind=REG_POSTERIOR, size=float(f.regularisation_bandwidth), min_spread=f.tight_min_spread_m)
     return rs
 
