@@ -67,7 +67,7 @@ def test_user_methods_in_tables_figures_and_check(two_ways, plugin_dir):
     plot = cli("plot", out, extra_path=plugin_dir, cwd=plugin_dir)
     assert plot.returncode == 0, plot.stderr
     assert list((out / "figures").glob("*.png"))
-    check = cli("check", two_ways["dask"], out, extra_path=plugin_dir, cwd=plugin_dir)
+    check = cli("check", two_ways["dask"], out, "--allow-underpowered", extra_path=plugin_dir, cwd=plugin_dir)
     assert check.returncode == 0, check.stdout + check.stderr
     assert PF in check.stdout
 
