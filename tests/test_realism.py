@@ -306,7 +306,9 @@ def test_fault_cells_are_paired_with_the_fault_free_cell():
     for faulty in (short_scenario(**SHORT, faults=dict(current_east_mps=0.2)),
                    short_scenario(**SHORT, terrain=dict(map_error_correlation_m=50.0))):
         assert faulty.pairing_key() == plain.pairing_key() and faulty.world_key() != plain.world_key()
-    assert plain.pairing_key() == plain.world_key()
+    no_multibeam = short_scenario(**SHORT, sensors=dict(multibeam_beams=0))
+    assert no_multibeam.pairing_key() == no_multibeam.world_key()  # without faults and multibeam the two agree
+    assert plain.pairing_key() != plain.world_key()  # the shared short scenario carries a small multibeam
     assert short_scenario(**SHORT, trajectory=dict(speed_mps=1.5)).pairing_key() != plain.pairing_key()
 
 
