@@ -60,7 +60,8 @@ def plane_like(template: Map, height: float) -> Map:
 def plane_world(monkeypatch):
     """Replace the truth and navigation seafloors by a flat plane at -90 m (deeper than the track).
 
-    The simulation's world cache is cleared before and after, so no other test sees the plane.
+    The simulation's world cache and the bound's cache are cleared before and after, so no
+    other test sees the plane.
     """
     import tanbench.terrain as run_mod
     import tanbench.simulation as sim_mod
@@ -76,18 +77,23 @@ def plane_world(monkeypatch):
     def fake_nav(spec, resolution_m):
         return plane_like(real_nav(spec, resolution_m), height)
 
-    sim_mod.noise_free_world.cache_clear()
+    import tanbench.bounds.pcrb as pcrb_mod
+
+    def clear_caches():
+        sim_mod.noise_free_world.cache_clear()
+        pcrb_mod._bound_cached.cache_clear()
+
+    clear_caches()
     monkeypatch.setattr(sim_mod, "truth_map", fake_truth)
     monkeypatch.setattr(run_mod, "navigation_map", fake_nav)
     # the modules that imported it at their top (methods hand it to the filters, the bound)
-    import tanbench.bounds.pcrb as pcrb_mod
     import tanbench.methods as methods_mod
 
     monkeypatch.setattr(methods_mod, "navigation_map", fake_nav)
     monkeypatch.setattr(pcrb_mod, "navigation_map", fake_nav)
     yield height
     monkeypatch.undo()
-    sim_mod.noise_free_world.cache_clear()
+    clear_caches()
 
 
 @pytest.fixture(scope="module")
