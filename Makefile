@@ -120,10 +120,10 @@ monterey: $(VENV)/.installed-run
 	rm -rf results/monterey
 	$(TB) run configs/monterey.yaml --out results/monterey --quiet
 
-## realism: each everyday fault alone against the fault-free cell into results/realism (tables)
+## realism: each everyday fault alone against the fault-free cell into results/realism (tables; no series: nothing plots them)
 realism: $(VENV)/.installed-run
 	rm -rf results/realism
-	$(TB) run configs/realism.yaml --out results/realism --quiet
+	$(TB) run configs/realism.yaml --out results/realism --quiet --series none
 
 ## multibeam: accuracy and cost against the multibeam's beam count and swath angle (tight-mbe, pmf-mbe, tight-dvl) on
 ## areas A, B and Monterey into results/multibeam (summary series): tables, the accuracy-cost figure and the
