@@ -706,6 +706,13 @@ def fitted_markdown(profiles: dict[str, pd.DataFrame], scores: pd.DataFrame | No
                       f"loose_architecture = {sel['filter.loose_architecture']}, min_spread_m = "
                       f"{sel['filter.min_spread_m']:g} (J = {sel['J']:.3f}; candidate 1, the literal profile, "
                       f"J = {scores['J'].iloc[0]:.3f}).", ""]
+        if bool(scores["selected"].iloc[0]):
+            lines += ["**The fit selected candidate 1, the literal profile itself**: none of the other 11 candidates has "
+                      "a smaller J on Tables 3-4. The fitted profile is therefore the literal one, and its held-out "
+                      "results below are the literal profile's cells run again"
+                      + (" (the same cell keys, seeds and worlds as the literal study: the same runs)."
+                         if "literal" in profiles and "cell_id" in profiles["fitted"]
+                         and set(profiles["fitted"]["cell_id"]) == set(profiles["literal"]["cell_id"]) else "."), ""]
     else:
         lines += [f"The fit's scores (`{fit_name}/scores.csv`) are not present: `make fitted` writes them.", ""]
     # held-out counts
