@@ -706,6 +706,13 @@ def fitted_markdown(profiles: dict[str, pd.DataFrame], scores: pd.DataFrame | No
                       f"loose_architecture = {sel['filter.loose_architecture']}, min_spread_m = "
                       f"{sel['filter.min_spread_m']:g} (J = {sel['J']:.3f}; candidate 1, the literal profile, "
                       f"J = {scores['J'].iloc[0]:.3f}).", ""]
+        from tanbench.fit import faithful_objective
+
+        ref = faithful_objective(int(sel["runs"]))
+        lines += [f"Reference, added after the fit (not part of the pre-registered rule): a faithful copy of the "
+                  f"paper scores J = {ref['median']:.3f} (median) and {ref['p95']:.3f} (95th percentile) at "
+                  f"{int(sel['runs'])} runs per target (section 11's distributions fitted to Tables 3-4): the part of "
+                  f"J that sampling noise alone gives; the selected candidate's J = {sel['J']:.3f}.", ""]
         if bool(scores["selected"].iloc[0]):
             lines += ["**The fit selected candidate 1, the literal profile itself**: none of the other 11 candidates has "
                       "a smaller J on Tables 3-4. The fitted profile is therefore the literal one, and its held-out "
