@@ -17,8 +17,10 @@ import numpy as np
 import pandas as pd
 
 from tanbench import store
+from tanbench.criterion import fitted_distribution
 from tanbench.errors import TanbenchError
 from tanbench.paperdata import tables_3_7
+from tanbench.results import load
 
 # the implementation details the fit may set (docs/model.md 11.3), in the order of its grid's factors
 FREE_KEYS = ("filter.divergence_reinit", "filter.divergence_spread_m", "filter.loose_architecture",
@@ -125,8 +127,6 @@ def faithful_objective(n_runs: int, reps: int = FAITHFUL_J_REPS, seed: int = FAI
     """J of a faithful copy of the paper at ``n_runs`` runs per target (added after the fit, reported, not part of
     the pre-registered rule): each training target's runs drawn from section 11's gamma or lognormal fitted to the
     paper's mean and [min, max] (Tables 3-4 only); {"median", "p95"}: the larger over the two families."""
-    from tanbench.criterion import fitted_distribution
-
     paper = tables_3_7() if paper is None else paper
     rows = paper[paper["table"].isin(TRAINING_TABLES)].drop_duplicates(list(CELL_KEYS) + ["method"])
     rng = np.random.default_rng(seed)
@@ -185,8 +185,6 @@ def fit_markdown(scores: pd.DataFrame, targets: pd.DataFrame, chosen: str) -> st
 
 def write_fit(directory: Path, paper: pd.DataFrame | None = None) -> tuple[pd.DataFrame, str]:
     """Score the fit sweep in ``directory`` and write FIT.md, scores.csv and targets.csv there."""
-    from tanbench.results import load
-
     directory = Path(directory)
     if not (directory / "sweep.yaml").exists():
         raise TanbenchError(f"{directory}: not a tanbench results directory (no sweep.yaml)")

@@ -19,6 +19,7 @@ from tanbench.results import load, load_series, sweep_tables
 from tanbench.sweep import load_results_sweep
 from tanbench.anatomy import anatomy_markdown, anatomy_table
 from tanbench import criterion as cr
+from tanbench.fit import faithful_objective
 
 TITLES = {
     "table3": "Table 3: area A, defaults (10 m map, noise +-1 m, 1 s, 3000 particles)",
@@ -706,8 +707,6 @@ def fitted_markdown(profiles: dict[str, pd.DataFrame], scores: pd.DataFrame | No
                       f"loose_architecture = {sel['filter.loose_architecture']}, min_spread_m = "
                       f"{sel['filter.min_spread_m']:g} (J = {sel['J']:.3f}; candidate 1, the literal profile, "
                       f"J = {scores['J'].iloc[0]:.3f}).", ""]
-        from tanbench.fit import faithful_objective
-
         ref = faithful_objective(int(sel["runs"]))
         lines += [f"Reference, added after the fit (not part of the pre-registered rule): a faithful copy of the "
                   f"paper scores J = {ref['median']:.3f} (median) and {ref['p95']:.3f} (95th percentile) at "
