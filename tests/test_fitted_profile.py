@@ -144,3 +144,13 @@ def test_the_report_section_renders_from_tiny_results():
     # without the fit's scores the section says so instead of failing
     assert "are not present" in fitted_markdown({"fitted": profiles["fitted"]}, None, "results/x-fit",
                                                 faithful_reps=100)
+
+
+def test_bad_input_is_one_clear_error_and_writes_nothing(tmp_path):
+    from tanbench.errors import TanbenchError
+
+    with pytest.raises(TanbenchError, match="no sweep.yaml"):
+        fit.write_fit(tmp_path)
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(TanbenchError, match="no candidate tables"):
+        fit.score(fake_study_runs().assign(tables="table3"))
