@@ -111,7 +111,7 @@ def _lost_text(a: pd.Series, b: pd.Series) -> str:
     return f"; lost runs {int(la.sum())}/{len(la)} vs {int(lb.sum())}/{len(lb)}"
 
 
-def _greater(claim: Claim, label: str, a, b, paired=True):
+def _greater(claim: Claim, label: str, a, b, paired=True, unit="m"):
     lost = _lost_text(a, b)
     rank = rank_greater(a, b, paired)
     if paired:
@@ -124,7 +124,7 @@ def _greater(claim: Claim, label: str, a, b, paired=True):
     if (rank < ALPHA) != (p < ALPHA):
         other = (f" [{'Wilcoxon signed-rank (pseudo-median)' if paired else 'Mann-Whitney U'} p={rank:.2g} "
                  f"disagrees; not counted]")
-    claim.check(p < ALPHA, f"{label}: mean {a.mean():.1f} vs {b.mean():.1f} m ({test}, p={p:.2g}{lost}){other}")
+    claim.check(p < ALPHA, f"{label}: mean {a.mean():.1f} vs {b.mean():.1f} {unit} ({test}, p={p:.2g}{lost}){other}")
 
 
 def _cell_id(runs: pd.DataFrame, **params) -> str:
@@ -175,7 +175,7 @@ def evaluate(runs: pd.DataFrame, series: pd.DataFrame) -> list[Claim]:
                                   f"(5..20; |MC mean error| {mean_b:.2f} deg)")
     _greater(c, "final heading error larger in B than in A",
              f("tight-dvl", column="final_heading_error_deg", area="B"),
-             f("tight-dvl", column="final_heading_error_deg"), paired=False)
+             f("tight-dvl", column="final_heading_error_deg"), paired=False, unit="deg")
 
     c = claim("3a", "Area B (flat): the tightly coupled methods are worse than in area A.")
     for m in ("tight-dvl", "tight-sbe"):
