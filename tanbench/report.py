@@ -443,20 +443,28 @@ def criterion_section(judged: dict, faithful_csv: Path | None = None) -> str:
               "| cell | method | paper mean [min, max] | " + " | ".join(f"{lab} | verdict" for lab in labels) + " |",
               "|" + "---|" * (3 + 2 * len(labels))]
     for setting, title in STATEMENT_CELLS:
-        for m in cr.METHODS:
-            for col in (cr.FINAL, cr.TIME_AVG):
-                rows = [j.cells[(j.cells["setting"] == setting) & (j.cells["method"] == m) & (j.cells["column"] == col)]
-                        for j in judged.values()]
-                if rows[0].empty:
-                    continue
-                p = rows[0].iloc[0]
-                name = title + (" (time-averaged)" if col == cr.TIME_AVG else "")
-                parts = []
-                for r in rows:
-                    parts += ["-", "-"] if r.empty else [_cell_text(r.iloc[0]), _verdict_word(r.iloc[0])]
-                lines.append(f"| {name} | {m} | {p['paper_mean']:.1f} [{p['paper_min']:.1f}, {p['paper_max']:.1f}] | "
-                             + " | ".join(parts) + " |")
+        lines += _cell_rows(judged, setting, title)
     return "\n".join(lines) + "\n"
+
+
+def _cell_rows(judged: dict, setting: str, title: str, mark: str = "") -> list[str]:
+    """The "cells beside the paper" rows of one setting: per method and error column, the paper's mean
+    [min, max], then each profile's cell text and verdict (the first profile's judgement names the cell)."""
+    lines = []
+    for m in cr.METHODS:
+        for col in (cr.FINAL, cr.TIME_AVG):
+            rows = [j.cells[(j.cells["setting"] == setting) & (j.cells["method"] == m) & (j.cells["column"] == col)]
+                    for j in judged.values()]
+            if rows[0].empty:
+                continue
+            p = rows[0].iloc[0]
+            name = title + (" (time-averaged)" if col == cr.TIME_AVG else "") + mark
+            parts = []
+            for r in rows:
+                parts += ["-", "-"] if r.empty else [_cell_text(r.iloc[0]), _verdict_word(r.iloc[0])]
+            lines.append(f"| {name} | {m} | {p['paper_mean']:.1f} [{p['paper_min']:.1f}, {p['paper_max']:.1f}] | "
+                         + " | ".join(parts) + " |")
+    return lines
 
 
 SEAFLOOR_SETTINGS = ("defaults", "map30", "noise3", "T10", "p1000")  # those present are used
@@ -764,19 +772,7 @@ def fitted_markdown(profiles: dict[str, pd.DataFrame], scores: pd.DataFrame | No
     titles = dict(STATEMENT_CELLS)
     for settings, mark in ((HELD_OUT_SETTINGS, ""), (TRAINING_SETTINGS, " (training)")):
         for setting in settings:
-            for m in cr.METHODS:
-                for col in (cr.FINAL, cr.TIME_AVG):
-                    rows = [j.cells[(j.cells["setting"] == setting) & (j.cells["method"] == m) & (j.cells["column"] == col)]
-                            for j in judged.values()]
-                    if rows[0].empty:
-                        continue
-                    p = rows[0].iloc[0]
-                    name = titles.get(setting, setting) + (" (time-averaged)" if col == cr.TIME_AVG else "") + mark
-                    parts = []
-                    for r in rows:
-                        parts += ["-", "-"] if r.empty else [_cell_text(r.iloc[0]), _verdict_word(r.iloc[0])]
-                    lines.append(f"| {name} | {m} | {p['paper_mean']:.1f} [{p['paper_min']:.1f}, "
-                                 f"{p['paper_max']:.1f}] | " + " | ".join(parts) + " |")
+            lines += _cell_rows(judged, setting, titles.get(setting, setting), mark)
     # what it answers
     st_f, cell_f = counts_sim["fitted"], counts["fitted"].get("cells")
     lines += ["", "### What this answers", ""]
