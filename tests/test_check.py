@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -11,28 +10,10 @@ import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
 
+from check_support import BASELINE, copy_of_baseline, rewrite_runs  # noqa: F401 (a fixture)
 from tanbench.check import CheckOptions, compare, holm
 from tanbench.cli import app, main
 from tanbench import store
-
-BASELINE = Path(__file__).resolve().parents[1] / "results" / "ci-baseline"
-
-
-@pytest.fixture()
-def copy_of_baseline(tmp_path) -> Path:
-    """A writable copy of the committed CI baseline."""
-    dst = tmp_path / "new"
-    shutil.copytree(BASELINE, dst, ignore=shutil.ignore_patterns(".work"))
-    return dst
-
-
-def _rewrite_runs(directory: Path, fn) -> None:
-    """Apply ``fn(df, cell_id)`` to every stored runs file's rows, keeping its metadata."""
-    for path in store.run_files(directory):
-        meta = store.read_meta(path)
-        df = fn(pq.read_table(path).to_pandas(), store.cell_of(path))
-        store.write_parquet(df, path, meta)
-
 
 def test_holm_matches_definition():
     """Holm adjustment: sorted p times (m - rank), cumulative max, capped at 1."""
@@ -61,7 +42,7 @@ def test_injected_degradation_flags_exactly_that_cell(copy_of_baseline):
                 df[col] *= 1.5
         return df
 
-    _rewrite_runs(copy_of_baseline, degrade)
+    rewrite_runs(copy_of_baseline, degrade)
     result = compare(copy_of_baseline, BASELINE)
     flagged = result.table[result.table["verdict"] == "regressed"]
     assert len(flagged) > 0
@@ -76,7 +57,7 @@ def test_improvement_is_not_a_regression(copy_of_baseline):
             df[col] *= 0.5
         return df
 
-    _rewrite_runs(copy_of_baseline, improve)
+    rewrite_runs(copy_of_baseline, improve)
     result = compare(copy_of_baseline, BASELINE)
     assert not result.regressed
     assert (result.table["verdict"] == "improved").any()
@@ -84,7 +65,7 @@ def test_improvement_is_not_a_regression(copy_of_baseline):
 
 def test_unpaired_when_seeds_differ(copy_of_baseline):
     """Different seeds (other vehicle data): the comparison falls back to the unpaired test."""
-    _rewrite_runs(copy_of_baseline, lambda df, cell_id: df.assign(seed=df["seed"] + 1))
+    rewrite_runs(copy_of_baseline, lambda df, cell_id: df.assign(seed=df["seed"] + 1))
     result = compare(copy_of_baseline, BASELINE)
     assert not result.table["paired"].any()
     assert not result.regressed
@@ -107,7 +88,7 @@ def test_margin_options_change_the_verdict(copy_of_baseline):
         df["final_horizontal_error_m"] += 0.3
         return df
 
-    _rewrite_runs(copy_of_baseline, nudge)
+    rewrite_runs(copy_of_baseline, nudge)
     assert not compare(copy_of_baseline, BASELINE).regressed
     strict = compare(copy_of_baseline, BASELINE, CheckOptions(margin_rel=0.0, margin_abs=0.0))
     assert strict.regressed
@@ -126,7 +107,7 @@ def test_cli_exit_codes_and_report(copy_of_baseline, tmp_path):
         df["final_horizontal_error_m"] *= 3.0
         return df
 
-    _rewrite_runs(copy_of_baseline, degrade)
+    rewrite_runs(copy_of_baseline, degrade)
     for name in ("r.md", "r.parquet"):
         bad = runner.invoke(app, ["check", str(copy_of_baseline), str(BASELINE), "--report", str(tmp_path / name)])
         assert bad.exit_code == 1, bad.output
@@ -169,7 +150,7 @@ def test_ignore_matches_cells_that_differ_only_there(copy_of_baseline):
         df["filter.random_numbers"] = "numpy" if (df["filter.random_numbers"] == "fast").all() else "fast"
         return df
 
-    _rewrite_runs(copy_of_baseline, other_stream)
+    rewrite_runs(copy_of_baseline, other_stream)
     with pytest.raises(TanbenchError, match="no cell and method in common"):
         compare(copy_of_baseline, BASELINE)
     result = compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("filter.random_numbers",)))

@@ -7,37 +7,16 @@ like the errors of a terrain-navigation filter) with enough datasets for the bou
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import numpy as np
-import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
 
+from check_support import BASELINE, copy_of_baseline, rewrite_runs  # noqa: F401 (a fixture)
 from tanbench import inference, store
 from tanbench.check import CheckOptions, compare, looks, spend
 from tanbench.cli import app
 from tanbench.errors import TanbenchError
-
-BASELINE = Path(__file__).resolve().parents[1] / "results" / "ci-baseline"
-
-
-@pytest.fixture()
-def copy_of_baseline(tmp_path) -> Path:
-    dst = tmp_path / "new"
-    shutil.copytree(BASELINE, dst, ignore=shutil.ignore_patterns(".work"))
-    return dst
-
-
-def _rewrite_runs(directory: Path, fn) -> None:
-    for path in store.run_files(directory):
-        meta = store.read_meta(path)
-        df = fn(pq.read_table(path).to_pandas(), store.cell_of(path))
-        if len(df):
-            store.write_parquet(df, path, meta)
-        else:
-            path.unlink()
-
 
 # ---- inference ------------------------------------------------------------------------------
 
@@ -128,7 +107,7 @@ def test_verdict_never_disagrees_in_sign_with_its_effect(copy_of_baseline):
         df.loc[flip, "diverged"] = ~df.loc[flip, "diverged"].astype(bool)
         return df
 
-    _rewrite_runs(copy_of_baseline, perturb)
+    rewrite_runs(copy_of_baseline, perturb)
     for pool in ("none", "method"):
         t = compare(copy_of_baseline, BASELINE, CheckOptions(margin_abs=0.0, pool=pool)).table
         assert (t.loc[t["verdict"] == "regressed", "change"] > t.loc[t["verdict"] == "regressed", "margin"]).all()
@@ -147,7 +126,7 @@ def test_lost_runs_are_their_own_outcome(copy_of_baseline):
             df.loc[sel, "diverged"] = True
         return df
 
-    _rewrite_runs(copy_of_baseline, lose)
+    rewrite_runs(copy_of_baseline, lose)
     t = compare(copy_of_baseline, BASELINE, CheckOptions(min_runs=5)).table
     row = t[(t["cell_id"] == victim) & (t["method"] == "tight-dvl")].set_index("metric")
     assert row.loc["lost", "verdict"] == "regressed"
@@ -170,8 +149,8 @@ def test_three_runs_of_a_method_made_700_times_worse_do_not_pass(copy_of_baselin
             df.loc[sel, col] *= 700.0
         return df
 
-    _rewrite_runs(base3, first3)
-    _rewrite_runs(copy_of_baseline, worse)
+    rewrite_runs(base3, first3)
+    rewrite_runs(copy_of_baseline, worse)
     out = CliRunner().invoke(app, ["check", str(copy_of_baseline), str(base3)])
     assert out.exit_code == 1
     assert "unchanged" not in [line.split()[0] for line in out.output.splitlines() if "tight-dvl" in line]
@@ -194,7 +173,7 @@ def test_pooling_per_method_is_declared_and_decides(copy_of_baseline):
         df.loc[sel, "mean_horizontal_error_m"] *= 1.3
         return df
 
-    _rewrite_runs(copy_of_baseline, worse)
+    rewrite_runs(copy_of_baseline, worse)
     result = compare(copy_of_baseline, BASELINE, CheckOptions(pool="method", margin_abs=0.0))
     d = result.decisive
     assert set(d["scope"]) == {"pooled"} and len(d) == 3 * 5
