@@ -15,6 +15,7 @@ from tanbench.check import CheckOptions, compare, holm
 from tanbench.cli import app, main
 from tanbench import store
 
+
 def test_holm_matches_definition():
     """Holm adjustment: sorted p times (m - rank), cumulative max, capped at 1."""
     p = np.array([0.01, 0.04, 0.03, 0.5])
