@@ -4,9 +4,9 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
-PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d)))
+PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d))) $(if $(wildcard results/zhou2017-fitted/sweep.yaml),--fitted results/zhou2017-fitted)
 
-.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism multibeam criterion seafloors literal-family check-numpy scaling clean
+.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism multibeam criterion seafloors literal-family fitted check-numpy scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -77,6 +77,17 @@ seafloors: $(VENV)/.installed-run
 literal-family: $(VENV)/.installed-run
 	$(TB) run configs/zhou2017-literal-family-loose.yaml --out results/zhou2017-literal-family-loose --series none --quiet
 	$(TB) run configs/zhou2017-literal-family.yaml --out results/zhou2017-literal-family --series none --quiet
+	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
+
+## fitted: the openly fitted profile (docs/model.md section 11.3): the grid of configs/zhou2017-fitted-fit.yaml over the
+## Table 3-4 cells (15 runs, no series) into results/zhou2017-fitted-fit, scored by `tanbench fit-profile` (FIT.md, scores.csv;
+## it stops if tanbench/profiles.py does not hold the selection), then the whole study under profile zhou2017-fitted
+## (50 runs, no series) into results/zhou2017-fitted, judged on the held-out tables in REPORT.md. Resumes.
+fitted: $(VENV)/.installed-run
+	$(TB) run configs/zhou2017-fitted-fit.yaml --out results/zhou2017-fitted-fit --series none --quiet --workers 2
+	$(TB) fit-profile results/zhou2017-fitted-fit
+	$(TB) run configs/zhou2017-fitted.yaml --out results/zhou2017-fitted --series none --quiet --workers 2
+	$(TB) tables results/zhou2017-fitted --compare-paper > results/zhou2017-fitted/tables.md
 	if [ -f results/zhou2017/sweep.yaml ]; then $(MAKE) --no-print-directory paper-report; fi
 
 ## anatomy: the literal profile with one mechanism switched at a time (configs/zhou2017-anatomy.yaml) into results/zhou2017-anatomy

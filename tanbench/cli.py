@@ -698,18 +698,38 @@ def report(
         None, "--seafloors", help="Directory of the many-seafloor sweeps (results/seafloors, make seafloors)."),
     family: Optional[list[Path]] = typer.Option(
         None, "--family", help="Results of the literal family (make literal-family); repeatable."),
+    fitted: Optional[Path] = typer.Option(
+        None, "--fitted", help="Results of configs/zhou2017-fitted.yaml (make fitted): the fitted profile's "
+                               "held-out tables; its fit's scores are read from <DIR>-fit."),
 ):
     from tanbench.report import write_report
 
     for label, d in (("--literal", literal), ("--anatomy", anatomy), ("--other-seafloor", other_seafloor),
-                     *(("--family", f) for f in family or [])):
+                     ("--fitted", fitted), *(("--family", f) for f in family or [])):
         if d is not None and not (d / "sweep.yaml").exists():
             raise TanbenchError(f"{label} {d}: not a tanbench results directory (no sweep.yaml)")
     if seafloors is not None and not seafloors.is_dir():
         raise TanbenchError(f"--seafloors {seafloors}: not a directory")
     path = write_report(directory, discussion, literal=literal, anatomy=anatomy, other_seafloor=other_seafloor,
-                        seafloors=seafloors, family=family or None)
+                        seafloors=seafloors, family=family or None, fitted=fitted)
     typer.echo(f"wrote {path}")
+
+
+@app.command("fit-profile", help="Score the fit of the zhou2017-fitted profile (docs/model.md 11.3) from the runs of "
+                                  "configs/zhou2017-fitted-fit.yaml: writes DIR/FIT.md, scores.csv and targets.csv and "
+                                  "checks that tanbench/profiles.py holds the selected values."
+             + EXAMPLE.format("tanbench fit-profile results/zhou2017-fitted-fit"))
+def fit_profile(directory: Path = typer.Argument(..., help="Results directory of configs/zhou2017-fitted-fit.yaml.")):
+    from tanbench.fit import selected_settings, write_fit
+    from tanbench.profiles import FITTED_SETTINGS
+
+    scores, chosen = write_fit(directory)
+    selected = selected_settings(scores)
+    typer.echo(f"wrote {directory / 'FIT.md'}; selected {chosen}: "
+               + ", ".join(f"{k} = {v!r}" for k, v in selected.items()))
+    if selected != FITTED_SETTINGS:
+        raise TanbenchError(f"the fit selects {selected} but tanbench/profiles.py's FITTED_SETTINGS holds "
+                            f"{FITTED_SETTINGS}: set FITTED_SETTINGS to the selection before the held-out sweep")
 
 
 @app.command(help="Prediction checked against outcome: Spearman rank correlations of the terrain suitability "

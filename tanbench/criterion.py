@@ -541,3 +541,61 @@ def paired_difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float, float
     n = d.size
     half = stats.t.ppf(0.975, n - 1) * d.std(ddof=1) / np.sqrt(n) if n > 1 else np.nan
     return float(d.mean()), float(d.mean() - half), float(d.mean() + half)
+
+
+# ---------------------------------------------------------------------------------------- held-out subsets
+
+def subset_counts(runs: pd.DataFrame, keys, cells, reps: int = 1000, seed: int = 20170403) -> dict:
+    """Counts of the statements ``keys`` and of the cells ``cells`` ((setting, method, column) tuples) that
+    ``runs`` pass under the criterion, each as (observed, bootstrap 2.5 %, 97.5 %, out of): the runs resampled
+    as in :func:`judge` (the same draw for every cell of a world). Only statements and cells present count."""
+    sample, _ = observed_sample(runs)
+    modes = step_modes()
+    boot = resample(sample, reps, seed)
+    flags, bflags = evaluate_statements(sample, modes, keys), evaluate_statements(boot, modes, keys)
+    out = {}
+    present = [k for k in keys if k in flags]
+    if present:
+        out["statements"] = (int(sum(bool(flags[k][0]) for k in present)),
+                             *np.percentile(np.sum([bflags[k] for k in present], axis=0), [2.5, 97.5]), len(present))
+    pc = paper_cells().set_index(["setting", "method", "column"])
+    ok_obs, ok_boot, n = 0, 0, 0
+    for key in cells:
+        if key not in sample:
+            continue
+        c = pc.loc[key]
+        m_ok, e_ok, _, _ = cell_checks(sample[key], c["mean"], c["min"], c["max"])
+        bm, be, _, _ = cell_checks(boot[key], c["mean"], c["min"], c["max"])
+        ok_obs += bool(m_ok[0] and e_ok[0])
+        ok_boot = ok_boot + (bm & be)
+        n += 1
+    if n:
+        out["cells"] = (ok_obs, *np.percentile(ok_boot, [2.5, 97.5]), n)
+    return out
+
+
+def faithful_subset_counts(keys, cells, reps: int = 1000, seed: int = 20170405) -> dict:
+    """A faithful copy's counts on the same subsets: {"statements": (5th, 95th percentile, out of), "cells": ...},
+    the smallest 5th and largest 95th percentile over the four scenarios (simulated as in :func:`faithful_pass`,
+    the paper's own 50 runs drawn again for the cell test). Statements that cannot be simulated are left out."""
+    modes = step_modes()
+    lows, highs = {"statements": [], "cells": []}, {"statements": [], "cells": []}
+    n_st = n_cells = 0
+    for i, sc in enumerate(SCENARIOS):
+        sample = simulate(sc, reps, seed + i)
+        paper = simulate(sc, reps, seed + 100 + i)
+        flags = evaluate_statements(sample, modes, keys)
+        n_st = len(flags)
+        count = np.sum(list(flags.values()), axis=0)
+        ok = 0
+        for key in cells:
+            p = paper[key]
+            m_ok, e_ok = _cell_flags(sample[key], p.mean(axis=1), p.min(axis=1), p.max(axis=1))
+            ok = ok + (m_ok & e_ok)
+        n_cells = len(cells)
+        for name, v in (("statements", count), ("cells", ok)):
+            lo, hi = np.percentile(v, [5, 95])
+            lows[name].append(lo)
+            highs[name].append(hi)
+    return {"statements": (min(lows["statements"]), max(highs["statements"]), n_st),
+            "cells": (min(lows["cells"]), max(highs["cells"]), n_cells)}

@@ -218,22 +218,43 @@ def sweep_tables(runs: pd.DataFrame, sweep) -> dict[str, pd.DataFrame]:
         if not cells:
             continue
         sub = runs[runs["cell_id"].isin({c.cell_id for c in cells})]
-        extra = [p for p in design if p not in TABLE_SCENARIO_COLUMNS]
-        cols = TABLE_SCENARIO_COLUMNS + [p for p in extra if p in sub.columns]
         if sub.empty:
             continue
+        cols = TABLE_SCENARIO_COLUMNS + _design_columns(design, sub)
         summary = summarize(sub, by=cols + ["method"], columns=getattr(sweep.spec, "table_columns", ()))
         summary.insert(0, "table", table)
-        # rows in the order the sweep file lists the design's values, then its methods
+        # rows in the order the sweep file lists the design's values (a mapping's flattened columns: in the
+        # order of the table's cells), then its methods
         ranks = []
-        for p, values in design.items():
-            if p in summary.columns:
-                ranks.append(f"_rank_{p}")
-                summary[ranks[-1]] = summary[p].map(lambda v, values=values: _design_rank(values, v))
+        cell_order = sub["cell_id"].map({c.cell_id: i for i, c in enumerate(cells)})
+        for p in [*(p for p in design if p in summary.columns),
+                  *(c for c in cols[len(TABLE_SCENARIO_COLUMNS):] if c not in design)]:
+            flat = p not in design
+            values = list(dict.fromkeys(sub[p].astype(str)[cell_order.sort_values(kind="stable").index])) if flat \
+                else design[p]
+            ranks.append(f"_rank_{p}")
+            summary[ranks[-1]] = summary[p].map(lambda v, values=values, flat=flat: _design_rank(
+                values, str(v) if flat else v))
         summary["_m"] = summary["method"].map(method_order)
         summary = summary.sort_values(ranks + ["_m"], kind="stable").drop(columns=ranks + ["_m"])
         out[table] = summary.reset_index(drop=True)
     return out
+
+
+def _design_columns(design: dict, runs: pd.DataFrame) -> list[str]:
+    """The runs' columns that key a table's rows besides the scenario's: each setting the design
+    varies, and for a setting whose values are mappings (``method_options``, a terrain) the
+    flattened columns (``method_options.tight-mbe.selection``) that differ between its cells, so
+    two cells of a table never share a row."""
+    cols = []
+    for p in design:
+        if p in TABLE_SCENARIO_COLUMNS:
+            continue
+        if p in runs.columns:
+            cols.append(p)
+            continue
+        cols += [c for c in runs.columns if c.startswith(p + ".") and runs[c].astype(str).nunique() > 1]
+    return cols
 
 
 def _design_rank(values: list, value) -> int:

@@ -34,7 +34,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("runner", ("tanbench.runner",)),
     ("missions", ("tanbench.missions",)),
     ("analysis", ("tanbench.suitability", "tanbench.prediction", "tanbench.plot", "tanbench.anatomy",
-                  "tanbench.paper", "tanbench.report", "tanbench.bench", "tanbench.testing")),
+                  "tanbench.paper", "tanbench.fit", "tanbench.report", "tanbench.bench", "tanbench.testing")),
     ("cli", ("tanbench.cli",)),
 ]
 ALLOWED_CIRCLES = [{"tanbench.runner.executors", "tanbench.runner.dask_plugin"}]

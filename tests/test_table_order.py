@@ -56,3 +56,29 @@ def test_rows_follow_the_design_order_then_the_methods():
     expected = [(n, r, m) for n in (2.0, 1.0) for r in (20.0, 10.0) for m in methods]
     assert list(zip(grid["noise_m"], grid["map_resolution_m"], grid["method"])) == expected
     assert (grid["n_runs"] == 2).all()
+
+
+MAPPING_SWEEP = """
+name: options
+seed: 1
+runs: 2
+methods: [tight-dvl, loose-dvl]
+scenario: {particles: 60, duration_s: 60}
+tables:
+  options:
+    method_options: [{tight-dvl: {}}, {tight-dvl: {}, loose-dvl: {}}]
+  thinning:
+    filter.resampling: [systematic]
+    method_options: [{"x.y:run": {k: 1, same: 0}}, {"x.y:run": {k: 2, same: 0}}]
+"""
+
+
+def test_cells_that_differ_only_in_a_mapping_setting_keep_their_own_rows():
+    """A design over a mapping (method_options) keys its rows by the flattened options that differ
+    between its cells: two cells never pooled into one row (the multibeam study's thinning table did)."""
+    sweep = parse_sweep(MAPPING_SWEEP.replace('"x.y:run"', "tight-dvl"), "options.yaml")
+    tables = sweep_tables(_runs(sweep), sweep)
+    thinning = tables["thinning"]
+    assert (thinning["n_runs"] == 2).all() and len(thinning) == 4
+    assert list(thinning["method_options.tight-dvl.k"]) == [1, 1, 2, 2]
+    assert "method_options.tight-dvl.same" not in thinning.columns  # the same in every cell: no column
