@@ -148,7 +148,8 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
         np.empty((2, 2))
     noise, dist = np.empty((6, m)), np.zeros((2, m))
     work = L.work_block(L.new_likelihood_work(m, 4 * grid.grids), m)
-    su2, inv_d2, out2 = L.beam_constants(SIG_U, SIG_D, OUTSIDE)
+    consts = L.beam_constants(SIG_U, SIG_D, OUTSIDE)
+    su2, inv_d2, out2 = consts
     inv_nu, half_nu1, student = L._density_constants(lik)
     rows = np.array([0, 1, 5, 6, 7], dtype=np.int64)
     fast = FastRng.from_seed(np.random.SeedSequence(7)).state
@@ -175,7 +176,7 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
     t["log-likelihoods (2 logs)"] = per(lambda: L.finish_loglik(work, lik.mapaware, student, half_nu1, dist, False,
                                                                 inv_d2, ll))
     t[f"whole likelihood pass ({beams} beams, map-aware Student-t)"] = per(
-        lambda: L.loglik_tight_pass(x, 0, vec, grid, lik, su2, out2, s["att"], dist, False, inv_d2, work, ll))
+        lambda: L.loglik_tight_pass(x, 0, vec, grid, lik, consts, s["att"], dist, False, work, ll))
     t["weights: log-weights, normalisation, ESS"] = per(lambda: normalise_with_ess(logw, add_log_weights(logw, ll), w))
     logw[:] = 0.0
     normalise_with_ess(logw, add_log_weights(logw, ll), w)
@@ -192,7 +193,7 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
     lo["propagate"] = per(lambda: propagate_loose(xl, 1.0, 0.5, noise[:3], 0.1, 0.5))
     xl[:] = x0[:2]
     lo[f"whole likelihood pass ({rows_l.shape[0]} beams, map-aware Student-t)"] = per(
-        lambda: L.loglik_loose_pass(xl, 0, rows_l, s["up"], grid, lik, su2, out2, work, ll))
+        lambda: L.loglik_loose_pass(xl, 0, rows_l, s["up"], grid, lik, consts, work, ll))
     lo["estimate (2 states)"] = per(lambda: weighted_estimate(xl, w, -1, 0.0, mean[:2], v[:2], cov))
     return {"tight-dvl": t, "loose-dvl": lo}
 
@@ -223,7 +224,7 @@ def _pf_step(s, sensor: str, loose: bool):
             L.loglik_loose(x, s["offsets"], s["up"], grid, lik, SIG_U, OUTSIDE, b["ll"])
         else:
             propagate_tight(x, s["inc"], s["yaw0"], b["noise"], *SIGMAS, DIST_PARTICLE, b["dist"], s["yaw_off"])
-            L.loglik_tight(x, beams, ranges, grid, lik, SIG_U, OUTSIDE, b["dist"], SIG_D, False, *s["att"][::3], b["ll"])
+            L.loglik_tight(x, beams, ranges, grid, lik, SIG_U, OUTSIDE, b["dist"], SIG_D, False, s["att"], b["ll"])
         normalize_log_weights(b["ll"], b["w"])
         weighted_estimate(x, b["w"], -1 if loose else 5, s["yaw0"], b["mean"], b["var"], b["cov"])
         resample_indices(SYSTEMATIC, b["w"], s["uni"], b["idx"])
@@ -235,12 +236,10 @@ def _pf_step(s, sensor: str, loose: bool):
         noise = gen.standard_normal((nnoise, m))
         if loose:
             x = propagate_loose_numpy(x0, 1.0, 0.5, noise, 0.1, 0.5)
-            ll, _ = L.loglik_loose_numpy(x, s["offsets"], s["up"], za[0], mvar, *za[1:], SIG_U, OUTSIDE, lik.mapaware,
-                                         lik.kind, lik.nu)
+            ll, _ = L.loglik_loose_numpy(x, s["offsets"], s["up"], za, mvar, lik, SIG_U, OUTSIDE)
         else:
             x, _ = propagate_tight_numpy(x0, s["inc"], s["yaw0"], noise, *SIGMAS, DIST_PARTICLE)
-            ll, _ = L.loglik_tight_numpy(x, beams, ranges, za[0], mvar, *za[1:], SIG_U, OUTSIDE, None, SIG_D,
-                                         lik.mapaware, lik.kind, lik.nu)
+            ll, _ = L.loglik_tight_numpy(x, beams, ranges, za, mvar, lik, SIG_U, OUTSIDE, None, SIG_D)
         w, _ = normalize_log_weights_numpy(ll)
         weighted_estimate_numpy(x, w, -1 if loose else 5, s["yaw0"])
         x = x[:, resample_indices_numpy(SYSTEMATIC, w, s["uni"])]
@@ -292,7 +291,7 @@ def _pmf_step(s, cells: int):
 
     def numpy():
         q = pmf.grid_nodes_numpy(ce, cn, 2.0, cells)
-        L.loglik_loose_numpy(q, s["offsets"], s["up"], za[0], None, *za[1:], SIG_U, OUTSIDE)
+        L.loglik_loose_numpy(q, s["offsets"], s["up"], za, None, plain, SIG_U, OUTSIDE)
         p = pmf.blur_separable_numpy(p0, 0.8)
         pmf.slice_moments_numpy(p, ce, cn, 2.0)
 
@@ -303,7 +302,7 @@ def _ekf_step(s):
     za = s["ctx"].nmap.kernel_args()
     x0 = np.array([s["x0"][0].mean(), s["x0"][1].mean(), 0.01, 0.0])
     p0 = np.diag([25.0, 25.0, 1e-3, 1e-10])
-    args = (s["offsets"], s["up"], *za, 10.0, SIG_U, 3, 100.0)
+    args = (s["offsets"], s["up"], za, 10.0, SIG_U, 3, 100.0)
 
     def jit():
         x, p = x0.copy(), p0.copy()
@@ -328,11 +327,11 @@ def _tercom_step(s, pings: int = 30, half_cells: int = 10):
     msd, mad = np.empty((deltas.size, n, n)), np.empty((deltas.size, n, n))
 
     def jit():
-        tercom.profile_surface(pe, pn, ph, pe[0], pn[0], half_cells, 5.0, deltas, *za, msd, mad)
+        tercom.profile_surface(pe, pn, ph, pe[0], pn[0], half_cells, 5.0, deltas, za, msd, mad)
         tercom.surface_likelihood_moments(msd, deltas, half_cells, 5.0, pings, SIG_U)
 
     def numpy():
-        a, _ = tercom.profile_surface_numpy(pe, pn, ph, pe[0], pn[0], half_cells, 5.0, deltas, *za)
+        a, _ = tercom.profile_surface_numpy(pe, pn, ph, pe[0], pn[0], half_cells, 5.0, deltas, za)
         tercom.surface_likelihood_moments_numpy(a, deltas, half_cells, 5.0, pings, SIG_U)
 
     return jit, numpy
@@ -471,14 +470,12 @@ def multibeam_likelihood(particles: int = 3000, beams: int = 64, reps: int = 10)
     used = vec.shape[0]
     x, grid, lik, m = s["x0"].copy(), s["grid"], s["lik"], particles
     work = L.work_block(L.new_likelihood_work(m, 4 * grid.grids), m)
-    su2, inv_d2, out2 = L.beam_constants(SIG_U, SIG_D, OUTSIDE)
+    consts = L.beam_constants(SIG_U, SIG_D, OUTSIDE)
     ll, dist = np.empty(m), np.zeros((2, m))
     nmap, f = s["ctx"].nmap, sc.filter
     mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
     za = nmap.kernel_args()
-    jit = _best(lambda: L.loglik_tight_pass(x, 0, vec, grid, lik, su2, out2, s["att"], dist, False, inv_d2, work,
-                                            ll), reps)[0]
-    ref = _best(lambda: L.loglik_tight_numpy(x, fan, ranges, za[0], mvar, *za[1:], SIG_U, OUTSIDE, None, SIG_D,
-                                             lik.mapaware, lik.kind, lik.nu), 2)[0]
+    jit = _best(lambda: L.loglik_tight_pass(x, 0, vec, grid, lik, consts, s["att"], dist, False, work, ll), reps)[0]
+    ref = _best(lambda: L.loglik_tight_numpy(x, fan, ranges, za, mvar, lik, SIG_U, OUTSIDE, None, SIG_D), 2)[0]
     return {"beams": used, "particles": m, "ns_per_particle_beam_jit": round(jit / (m * used) * 1e9, 2),
             "ns_per_particle_beam_numpy": round(ref / (m * used) * 1e9, 2), "numpy_ratio": round(ref / jit, 1)}

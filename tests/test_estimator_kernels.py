@@ -107,8 +107,8 @@ def test_ekf_kernels_match_numpy(rough_map, rng):
     p = np.diag([400.0, 400.0, 0.05, 1e-9])
     for iterations in (1, 3):
         xk, pk = x.copy(), p.copy()
-        nis, used = ekf.iekf_update(xk, pk, offs, up, *zargs, 10.0, 1.0, iterations, 1e9)
-        xr, pr, nis_r, used_r = ekf.iekf_update_numpy(x, p, offs, up, *zargs, 10.0, 1.0, iterations, 1e9)
+        nis, used = ekf.iekf_update(xk, pk, offs, up, zargs, 10.0, 1.0, iterations, 1e9)
+        xr, pr, nis_r, used_r = ekf.iekf_update_numpy(x, p, offs, up, zargs, 10.0, 1.0, iterations, 1e9)
         assert used == used_r == 3
         assert nis == pytest.approx(nis_r, rel=1e-9)
         np.testing.assert_allclose(xk, xr, **TOL)
@@ -125,15 +125,15 @@ def test_iekf_first_pass_is_the_ekf_update_and_the_gate_holds(rough_map, rng):
     nu = np.zeros(4)
     rv = np.zeros(4)
     step = 10.0
-    ekf.beam_linearisation(x, offs, -20.0, *zargs, step, 1.0, hm, nu, rv)
+    ekf.beam_linearisation(x, offs, -20.0, zargs, step, 1.0, hm, nu, rv)
     g = -hm  # d h / d x
     k = p @ g.T @ np.linalg.inv(g @ p @ g.T + np.diag(rv))
     xk, pk = x.copy(), p.copy()
-    nis, _ = ekf.iekf_update(xk, pk, offs, -20.0, *zargs, step, 1.0, 1, 1e9)
+    nis, _ = ekf.iekf_update(xk, pk, offs, -20.0, zargs, step, 1.0, 1, 1e9)
     np.testing.assert_allclose(xk, x + k @ nu, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(pk, (np.eye(4) - k @ g) @ p, rtol=1e-7, atol=1e-12)
     xg, pg = x.copy(), p.copy()
-    ekf.iekf_update(xg, pg, offs, -20.0 + 50.0, *zargs, step, 1.0, 3, 1.0)
+    ekf.iekf_update(xg, pg, offs, -20.0 + 50.0, zargs, step, 1.0, 3, 1.0)
     np.testing.assert_array_equal(xg, x)
     np.testing.assert_array_equal(pg, p)
 
@@ -156,8 +156,8 @@ def test_tercom_surface_matches_numpy_and_finds_a_known_offset(rough_map, rng):
     msd = np.empty((5, 2 * half + 1, 2 * half + 1))
     mad = np.empty_like(msd)
     pe, pn = np.ascontiguousarray(shown[:, 0]), np.ascontiguousarray(shown[:, 1])
-    tercom.profile_surface(pe, pn, truth_h, pe[-1], pn[-1], half, 1.0, deltas, *zargs, msd, mad)
-    msd_r, mad_r = tercom.profile_surface_numpy(pe, pn, truth_h, pe[-1], pn[-1], half, 1.0, deltas, *zargs)
+    tercom.profile_surface(pe, pn, truth_h, pe[-1], pn[-1], half, 1.0, deltas, zargs, msd, mad)
+    msd_r, mad_r = tercom.profile_surface_numpy(pe, pn, truth_h, pe[-1], pn[-1], half, 1.0, deltas, zargs)
     np.testing.assert_allclose(msd, msd_r, **TOL)
     np.testing.assert_allclose(mad, mad_r, **TOL)
     d, i, j = np.unravel_index(np.argmin(msd), msd.shape)
@@ -176,7 +176,7 @@ def test_tercom_surface_off_map_is_infinite(rough_map):
     pn = np.array([5.0, 6.0])
     msd = np.empty((1, 3, 3))
     mad = np.empty_like(msd)
-    tercom.profile_surface(pe, pn, np.array([-80.0, -80.0]), 5.0, 5.0, 1, 10.0, np.zeros(1), *zargs, msd, mad)
+    tercom.profile_surface(pe, pn, np.array([-80.0, -80.0]), 5.0, 5.0, 1, 10.0, np.zeros(1), zargs, msd, mad)
     assert np.isinf(msd[0, 0, 0]) and np.isfinite(msd[0, 1, 1])
 
 

@@ -31,6 +31,7 @@ from tanbench.filters import propagate as prop
 from tanbench.filters import resample as rs
 from tanbench.filters.likelihood import Likelihood
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
+from tanbench.filters.trig import attitude_reference
 from tanbench.navigation import increments as incmod
 from tanbench.navigation.increments import compute_increments
 from tanbench.sensors.imu import DEG_PER_H
@@ -53,7 +54,7 @@ def assert_loglik_matches(out, best, ref, best_ref):
 
 
 SCHEME_IDS = sorted(RESAMPLING, key=RESAMPLING.get)
-PLAIN = Likelihood(False, 0, 4.0)  # the paper's Gaussian beam density (the numpy references' default)
+PLAIN = Likelihood(False, 0, 4.0)  # the paper's Gaussian beam density
 
 
 def columns(x: np.ndarray) -> np.ndarray:
@@ -246,8 +247,8 @@ def test_loglik_tight_matches_numpy(world, sensor, nan_beams, reference):
         for dist in (None, rng.normal(0, 0.3, (2, x.shape[1]))):
             out = np.empty(x.shape[1])
             best = lik.loglik_tight(x, beams, ranges, grid, PLAIN, 1.0, 5.0, np.zeros((2, x.shape[1])) if dist is None
-                                    else dist, 0.1, dist is not None, *attitude(ping), out)
-            ref, best_ref = lik.loglik_tight_numpy(x, beams, ranges, za[0], None, *za[1:], 1.0, 5.0, dist, 0.1)
+                                    else dist, 0.1, dist is not None, attitude_reference(*attitude(ping)), out)
+            ref, best_ref = lik.loglik_tight_numpy(x, beams, ranges, za, None, PLAIN, 1.0, 5.0, dist, 0.1)
             assert_loglik_matches(out, best, ref, best_ref)
 
 
@@ -262,7 +263,7 @@ def test_loglik_tight_outside_penalty_and_best(world):
     out = np.empty(x.shape[1])
     sig_u, outside, sig_d = 1.5, 5.0, 0.1
     best = lik.loglik_tight(x, v.obs.dvl_beams, ranges, node_grid(nmap), PLAIN, sig_u, outside, dist, sig_d, True,
-                            *nav_attitude(v, 100), out)
+                            attitude_reference(*nav_attitude(v, 100)), out)
     dist_term = (dist ** 2).sum(axis=0) / sig_d ** 2
     np.testing.assert_allclose(out[off], -0.5 * (4 * outside ** 2 + dist_term[off]), rtol=1e-12)
     chi = -2.0 * out - dist_term
@@ -287,10 +288,10 @@ def test_loglik_tight_nan_range_is_no_beam(world, drop):
     with_nan[drop] = np.nan
     out_nan = np.empty(x.shape[1])
     out_sub = np.empty(x.shape[1])
-    att = nav_attitude(v, 200)
-    best_nan = lik.loglik_tight(x, v.obs.dvl_beams, with_nan, grid, PLAIN, 1.0, 5.0, dist, 0.1, True, *att, out_nan)
+    att = attitude_reference(*nav_attitude(v, 200))
+    best_nan = lik.loglik_tight(x, v.obs.dvl_beams, with_nan, grid, PLAIN, 1.0, 5.0, dist, 0.1, True, att, out_nan)
     best_sub = lik.loglik_tight(x, np.ascontiguousarray(v.obs.dvl_beams[keep]), np.ascontiguousarray(ranges[keep]),
-                                grid, PLAIN, 1.0, 5.0, dist, 0.1, True, *att, out_sub)
+                                grid, PLAIN, 1.0, 5.0, dist, 0.1, True, att, out_sub)
     np.testing.assert_allclose(out_nan, out_sub, rtol=1e-12, atol=1e-12)
     assert best_nan == pytest.approx(best_sub, rel=1e-12)
 
@@ -303,7 +304,7 @@ def test_loglik_tight_no_ranges_at_all(world):
     dist = rng.normal(0, 0.3, (2, x.shape[1]))
     out = np.empty(x.shape[1])
     best = lik.loglik_tight(x, v.obs.sbe_beams, np.array([np.nan]), node_grid(nmap), PLAIN, 1.0, 5.0, dist, 0.1, True,
-                            *nav_attitude(v, 0), out)
+                            attitude_reference(*nav_attitude(v, 0)), out)
     np.testing.assert_allclose(out, -0.5 * (dist ** 2).sum(axis=0) / 0.01, rtol=1e-12)
     assert best == np.inf
 
@@ -328,7 +329,7 @@ def test_loglik_loose_matches_numpy(world, nan_beams):
         off, up = loose_offsets(v, ping, RANGE_CASES[nan_beams])
         out = np.empty(x.shape[1])
         best = lik.loglik_loose(x, off, up, node_grid(nmap), PLAIN, 1.0, 5.0, out)
-        ref, best_ref = lik.loglik_loose_numpy(x, off, up, za[0], None, *za[1:], 1.0, 5.0)
+        ref, best_ref = lik.loglik_loose_numpy(x, off, up, za, None, PLAIN, 1.0, 5.0)
         assert_loglik_matches(out, best, ref, best_ref)
 
 

@@ -12,6 +12,7 @@ import pytest
 from tanbench.config import Scenario
 from tanbench.filters.beams import nav_frame_offsets
 from tanbench.filters.likelihood import Likelihood, loglik_tight, loglik_tight_numpy
+from tanbench.filters.trig import attitude_reference
 from tanbench.filters.swath import beam_information, beam_information_numpy, every_kth, most_informative
 from tanbench.sensors.multibeam import (fan_angles_deg, fan_directions, fan_directions_numpy, fan_vectors,
                                         swath_ranges)
@@ -137,9 +138,9 @@ def test_the_likelihood_kernel_weighs_a_64_beam_swath_as_its_numpy_twin(mapaware
     grid = node_grid_of(*tmap.kernel_args(), mvar if mapaware else None)
     out = np.empty(m)
     best = loglik_tight(x, beams, ranges, grid, Likelihood(mapaware, kind, 4.0), 1.0, 5.0, np.zeros((2, m)), 0.1,
-                        False, 0.0, 0.0, 0.3, out)
-    ref, ref_best = loglik_tight_numpy(x, beams, ranges, tmap.z, mvar, *tmap.kernel_args()[1:], 1.0, 5.0, None, 0.1,
-                                       mapaware, kind, 4.0)
+                        False, attitude_reference(0.0, 0.0, 0.3), out)
+    ref, ref_best = loglik_tight_numpy(x, beams, ranges, tmap.kernel_args(), mvar, Likelihood(mapaware, kind, 4.0),
+                                       1.0, 5.0, None, 0.1)
     np.testing.assert_allclose(out, ref, rtol=1e-9, atol=1e-7)
     assert best == pytest.approx(ref_best, rel=1e-9)
 

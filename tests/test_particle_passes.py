@@ -23,12 +23,12 @@ from tanbench.filters import resample as rs
 from tanbench.filters.likelihood import Likelihood
 from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals, fill_uniforms, loop_rng
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import attitude_reference
+from tanbench.filters.trig import LEVEL, attitude_reference
 from tanbench.navigation.increments import compute_increments
 from tanbench.options import LIKELIHOOD
 from tanbench.simulation import simulate_vehicle
 from tanbench.terrain import navigation_map
-from tanbench.terrain.grid import bilinear_numpy, node_grid, node_grid_at, node_grid_of
+from tanbench.terrain.grid import MapArgs, bilinear_numpy, node_grid, node_grid_at, node_grid_of
 from tanbench.terrain.representation import map_variance_grid
 
 
@@ -85,16 +85,16 @@ def test_tight_blocks_are_the_whole_cloud(world, likelihood, dist_mode):
     ranges[2] = np.nan
     vec = lik.beam_vectors(obs.dvl_beams, ranges)
     att = attitude_reference(nav.pitch[k], nav.roll[k], nav.yaw[k] + 0.1)
-    su2, inv_d2, out2 = lik.beam_constants(1.0, 0.1, 5.0)
+    consts = lik.beam_constants(1.0, 0.1, 5.0)
     for euler in (False, True):
         whole, dist_whole, ll_whole = x0.copy(), np.zeros((2, m)), np.empty(m)
         blocks, ll_blocks = x0.copy(), np.empty(m)
         if euler:
             prop.propagate_tight_euler(whole, u, 1.0, inc[row], noise, 0.07, 0.01, 3e-4, dist_mode, dist_whole,
-                                       nav.pitch[k], nav.roll[k], nav.yaw[k])
+                                       attitude_reference(nav.pitch[k], nav.roll[k], nav.yaw[k]))
         else:
             prop.propagate_tight(whole, inc[row], nav.yaw[k], noise, 0.07, 0.01, 3e-4, dist_mode, dist_whole, 0.1)
-        best_whole = lik.loglik_tight_pass(whole, 0, vec, grid, lk, su2, out2, att, dist_whole, True, inv_d2,
+        best_whole = lik.loglik_tight_pass(whole, 0, vec, grid, lk, consts, att, dist_whole, True,
                                            lik.work_block(lik.new_likelihood_work(m, 4 * grid.grids), m), ll_whole)
         work = lik.new_likelihood_work(block, 4 * grid.grids)
         best_blocks = np.inf
@@ -104,11 +104,11 @@ def test_tight_blocks_are_the_whole_cloud(world, likelihood, dist_mode):
             dist = np.zeros((2, n))
             if euler:
                 prop.propagate_tight_euler(blocks, u, 1.0, inc[row], nz, 0.07, 0.01, 3e-4, dist_mode, dist,
-                                           nav.pitch[k], nav.roll[k], nav.yaw[k], lo)
+                                           attitude_reference(nav.pitch[k], nav.roll[k], nav.yaw[k]), lo)
             else:
                 prop.propagate_tight(blocks, inc[row], nav.yaw[k], nz, 0.07, 0.01, 3e-4, dist_mode, dist, 0.1, lo)
-            best_blocks = min(best_blocks, lik.loglik_tight_pass(blocks, lo, vec, grid, lk, su2, out2, att, dist,
-                                                                 True, inv_d2, lik.work_block(work, n),
+            best_blocks = min(best_blocks, lik.loglik_tight_pass(blocks, lo, vec, grid, lk, consts, att, dist,
+                                                                 True, lik.work_block(work, n),
                                                                  ll_blocks[lo:lo + n]))
         assert np.array_equal(blocks, whole)
         assert np.array_equal(ll_blocks, ll_whole)
@@ -129,17 +129,17 @@ def test_loose_blocks_are_the_whole_cloud(world, likelihood):
     noise = rng.standard_normal((3, m))
     off = np.ascontiguousarray(obs.dvl_beams * obs.dvl_ranges[300][:, None])
     rows = lik.used_offsets(off)
-    su2, _, out2 = lik.beam_constants(1.0, 1.0, 5.0)
+    consts = lik.beam_constants(1.0, 1.0, 5.0)
     whole, ll_whole = x0.copy(), np.empty(m)
     prop.propagate_loose(whole, 3.0, -2.0, noise, 0.1, 0.3)
-    best_whole = lik.loglik_loose_pass(whole, 0, rows, nav.pos[k, 2], grid, lk, su2, out2,
+    best_whole = lik.loglik_loose_pass(whole, 0, rows, nav.pos[k, 2], grid, lk, consts,
                                        lik.work_block(lik.new_likelihood_work(m, 4 * grid.grids), m), ll_whole)
     blocks, ll_blocks, best_blocks = x0.copy(), np.empty(m), np.inf
     work = lik.new_likelihood_work(block, 4 * grid.grids)
     for lo in range(0, m, block):
         n = min(block, m - lo)
         prop.propagate_loose(blocks, 3.0, -2.0, np.ascontiguousarray(noise[:, lo:lo + n]), 0.1, 0.3, lo)
-        best_blocks = min(best_blocks, lik.loglik_loose_pass(blocks, lo, rows, nav.pos[k, 2], grid, lk, su2, out2,
+        best_blocks = min(best_blocks, lik.loglik_loose_pass(blocks, lo, rows, nav.pos[k, 2], grid, lk, consts,
                                                              lik.work_block(work, n), ll_blocks[lo:lo + n]))
     assert np.array_equal(blocks, whole)
     assert np.array_equal(ll_blocks, ll_whole)
@@ -148,7 +148,7 @@ def test_loose_blocks_are_the_whole_cloud(world, likelihood):
 
 def test_trigonometry_references_change_nothing_but_the_last_bits(world):
     """A cloud 30 degrees off the navigation heading: centring the particles' sines and cosines on
-    its offset (``yaw_off``, ``ref_yaw``, the Euler step's ``ref_*``) gives the numpy references'
+    its offset (``yaw_off``, the attitude reference ``att`` of the likelihood and the Euler step) gives the numpy references'
     motion and likelihood, as centring them on the navigation attitude does."""
     vehicle, nmap, mvar = world
     obs, nav = vehicle.obs, vehicle.obs.nav
@@ -171,17 +171,17 @@ def test_trigonometry_references_change_nothing_but_the_last_bits(world):
     want, _ = prop.propagate_tight_euler_numpy(x0, u, 1.0, inc[row], noise, 0.07, 0.01, 3e-4, prop.DIST_NONE)
     for ref in ((0.0, 0.0, 0.0), (nav.pitch[k], nav.roll[k], nav.yaw[k] + yaw_off)):
         x, dist = x0.copy(), np.empty((2, m))
-        prop.propagate_tight_euler(x, u, 1.0, inc[row], noise, 0.07, 0.01, 3e-4, prop.DIST_NONE, dist, *ref)
+        prop.propagate_tight_euler(x, u, 1.0, inc[row], noise, 0.07, 0.01, 3e-4, prop.DIST_NONE, dist,
+                                   attitude_reference(*ref))
         np.testing.assert_allclose(x, want, rtol=0, atol=1e-9)
     ranges = obs.dvl_ranges[row + 1]
     dist = np.zeros((2, m))
     for lk in LIKELIHOODS.values():
-        want_ll, want_best = lik.loglik_tight_numpy(x0, obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0, None,
-                                                    0.1, lk.mapaware, lk.kind, lk.nu)
+        want_ll, want_best = lik.loglik_tight_numpy(x0, obs.dvl_beams, ranges, za, mvar, lk, 1.0, 5.0, None, 0.1)
         for ref_yaw in (nav.yaw[k], nav.yaw[k] + yaw_off):
             ll = np.empty(m)
             best = lik.loglik_tight(x0, obs.dvl_beams, ranges, _grid(nmap, mvar, lk), lk, 1.0, 5.0, dist, 0.1, False,
-                                    nav.pitch[k], nav.roll[k], ref_yaw, ll)
+                                    attitude_reference(nav.pitch[k], nav.roll[k], ref_yaw), ll)
             np.testing.assert_allclose(ll, want_ll, rtol=1e-9, atol=1e-9)
             assert best == pytest.approx(want_best, rel=1e-9)
 
@@ -267,9 +267,9 @@ def test_mapaware_log_of_products_stays_finite_with_many_beams():
     for kind in LIKELIHOOD.values():
         out = np.empty(64)
         best = lik.loglik_tight(x, beams, ranges, grid, Likelihood(True, kind, 4.0), 1.0, 5.0, dist, 0.1, True,
-                                0.0, 0.0, 0.0, out)
-        ref, best_ref = lik.loglik_tight_numpy(x, beams, ranges, z, mvar, 0.0, 0.0, 0.1, 0.1, 1.0, 5.0, dist, 0.1,
-                                               True, kind, 4.0)
+                                LEVEL, out)
+        ref, best_ref = lik.loglik_tight_numpy(x, beams, ranges, MapArgs(z, 0.0, 0.0, 0.1, 0.1), mvar,
+                                               Likelihood(True, kind, 4.0), 1.0, 5.0, dist, 0.1)
         assert np.isfinite(out).all()
         np.testing.assert_allclose(out, ref, rtol=1e-9)
         assert best == pytest.approx(best_ref, rel=1e-12)

@@ -21,6 +21,7 @@ from tanbench.methods import run_method
 from tanbench.scoring import recovery_stats
 from tanbench.filters.state import E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.tight import keep_on_map, keep_on_map_numpy
+from tanbench.filters.trig import LEVEL
 from tanbench.navigation import eskf
 from tanbench.options import LIKELIHOOD
 from tanbench.simulation import simulate_vehicle
@@ -179,9 +180,9 @@ def test_loglik_tight_mapaware_matches_numpy(world, kind):
         dist = rng.normal(0, 0.3, (2, x.shape[1]))
         out = np.empty(x.shape[1])
         best = lik.loglik_tight(x, v.obs.dvl_beams, ranges, grid, Likelihood(True, LIKELIHOOD[kind], 4.0), 1.0, 5.0,
-                                dist, 0.1, True, 0.0, 0.0, 0.0, out)
-        ref, best_ref = lik.loglik_tight_numpy(x, v.obs.dvl_beams, ranges, za[0], mvar, *za[1:], 1.0, 5.0,
-                                               dist, 0.1, True, LIKELIHOOD[kind], 4.0)
+                                dist, 0.1, True, LEVEL, out)
+        ref, best_ref = lik.loglik_tight_numpy(x, v.obs.dvl_beams, ranges, za, mvar,
+                                               Likelihood(True, LIKELIHOOD[kind], 4.0), 1.0, 5.0, dist, 0.1)
         np.testing.assert_allclose(out, ref, **TOL)
         assert best == pytest.approx(best_ref, rel=1e-9)
 
@@ -195,9 +196,9 @@ def test_mapaware_gaussian_with_zero_variance_is_the_plain_kernel(world):
     dist = rng.normal(0, 0.3, (2, x.shape[1]))
     a, b = np.empty(x.shape[1]), np.empty(x.shape[1])
     best_a = lik.loglik_tight(x, v.obs.dvl_beams, v.obs.dvl_ranges[100], node_grid(nmap),
-                              Likelihood(False, lik.LIK_GAUSSIAN, 4.0), 1.3, 5.0, dist, 0.1, True, 0.0, 0.0, 0.0, a)
+                              Likelihood(False, lik.LIK_GAUSSIAN, 4.0), 1.3, 5.0, dist, 0.1, True, LEVEL, a)
     best_b = lik.loglik_tight(x, v.obs.dvl_beams, v.obs.dvl_ranges[100], node_grid(nmap, zero),
-                              Likelihood(True, lik.LIK_GAUSSIAN, 4.0), 1.3, 5.0, dist, 0.1, True, 0.0, 0.0, 0.0, b)
+                              Likelihood(True, lik.LIK_GAUSSIAN, 4.0), 1.3, 5.0, dist, 0.1, True, LEVEL, b)
     np.testing.assert_allclose(a, b, **TOL)
     assert best_a == pytest.approx(best_b, rel=1e-12)
 
@@ -214,8 +215,8 @@ def test_loglik_loose_mapaware_matches_numpy(world, kind):
     out = np.empty(x.shape[1])
     best = lik.loglik_loose(x, off, -40.0, node_grid(nmap, mvar), Likelihood(True, LIKELIHOOD[kind], 4.0), 1.0, 5.0,
                             out)
-    ref, best_ref = lik.loglik_loose_numpy(x, off, -40.0, za[0], mvar, *za[1:], 1.0, 5.0, True,
-                                           LIKELIHOOD[kind], 4.0)
+    ref, best_ref = lik.loglik_loose_numpy(x, off, -40.0, za, mvar, Likelihood(True, LIKELIHOOD[kind], 4.0), 1.0,
+                                           5.0)
     np.testing.assert_allclose(out, ref, **TOL)
     assert best == pytest.approx(best_ref, rel=1e-9)
 

@@ -100,9 +100,11 @@ def ekf_predict_numpy(x, p, d0e, d0n, s_z, q_pos, q_delta, q_bias):
 
 
 @nb.njit(cache=True)
-def beam_linearisation(xi, offsets_k, up, z, e0, n0, inv_re, inv_rn, step, sig_u, hmat, resid, rvar):
+def beam_linearisation(xi, offsets_k, up, zmap, step, sig_u, hmat, resid, rvar):
     """Innovations ``resid`` (m,), Jacobian rows ``hmat`` (m, 4) and variances ``rvar`` (m,) of the beams
-    at iterate ``xi``; returns the number of usable beams (others get a zero row and unit variance)."""
+    at iterate ``xi``, on the map ``zmap`` (its ``MapArgs``); returns the number of usable beams
+    (others get a zero row and unit variance)."""
+    z, e0, n0, inv_re, inv_rn = zmap
     c = math.cos(xi[2])
     s = math.sin(xi[2])
     used = 0
@@ -130,9 +132,11 @@ def beam_linearisation(xi, offsets_k, up, z, e0, n0, inv_re, inv_rn, step, sig_u
 
 
 @nb.njit(cache=True)
-def iekf_update(x, p, offsets_k, up, z, e0, n0, inv_re, inv_rn, res, sig_u, iterations, gate):
-    """Iterated EKF update of ``x``, ``p`` in place; returns (normalised innovation squared, beams used)
-    or (-1, 0) when no beam is usable, (NIS, m) with nothing changed when NIS exceeds ``gate``."""
+def iekf_update(x, p, offsets_k, up, zmap, res, sig_u, iterations, gate):
+    """Iterated EKF update of ``x``, ``p`` in place, on the map ``zmap`` (its ``MapArgs``); returns
+    (normalised innovation squared, beams used) or (-1, 0) when no beam is usable, (NIS, m) with
+    nothing changed when NIS exceeds ``gate``."""
+    _, _, _, inv_re, inv_rn = zmap
     m = offsets_k.shape[0]
     hmat = np.empty((m, NX))
     resid = np.empty(m)
@@ -145,7 +149,7 @@ def iekf_update(x, p, offsets_k, up, z, e0, n0, inv_re, inv_rn, res, sig_u, iter
     used = 0
     gain = np.zeros((NX, m))
     for it in range(iterations):
-        used = beam_linearisation(xi, offsets_k, up, z, e0, n0, inv_re, inv_rn, step, sig_u, hmat, resid, rvar)
+        used = beam_linearisation(xi, offsets_k, up, zmap, step, sig_u, hmat, resid, rvar)
         if used == 0:
             return -1.0, 0
         s_mat = hmat @ p @ hmat.T
@@ -167,8 +171,9 @@ def iekf_update(x, p, offsets_k, up, z, e0, n0, inv_re, inv_rn, res, sig_u, iter
     return nis, used
 
 
-def iekf_update_numpy(x, p, offsets_k, up, z, e0, n0, inv_re, inv_rn, res, sig_u, iterations, gate):
+def iekf_update_numpy(x, p, offsets_k, up, zmap, res, sig_u, iterations, gate):
     """Plain-numpy reference of :func:`iekf_update`: returns (x, p, nis, used)."""
+    z, e0, n0, inv_re, inv_rn = zmap
     x0 = x.copy()
     xi = x.copy()
     step = max(1.0 / min(inv_re, inv_rn), math.sqrt(max(p[0, 0], p[1, 1])), res)
@@ -210,7 +215,7 @@ def ekf_loop(x, p, inc_d0, inc_sz, offsets, nav_up, zmap, settings, out):
     (K-1, 2), ``inc_sz`` (K-1,)); ``zmap`` the map's ``MapArgs``; ``settings`` an
     :class:`EkfSettings`; fills ``out`` (:class:`EkfOutputs`): ``est``/``var`` (K, 4) and
     ``rejected`` (K,) (1 = update gated out)."""
-    z, e0, n0, inv_re, inv_rn = zmap
+    _, _, _, inv_re, inv_rn = zmap
     q_pos, q_delta, q_bias, sig_u, iterations, gate = settings.q_pos, settings.q_delta, settings.q_bias, \
         settings.sig_u, settings.iterations, settings.gate
     est, var, rejected = out
@@ -219,8 +224,7 @@ def ekf_loop(x, p, inc_d0, inc_sz, offsets, nav_up, zmap, settings, out):
     for k in range(steps):
         if k > 0:
             ekf_predict(x, p, inc_d0[k - 1, 0], inc_d0[k - 1, 1], inc_sz[k - 1], q_pos, q_delta, q_bias)
-        nis, used = iekf_update(x, p, offsets[k], nav_up[k], z, e0, n0, inv_re, inv_rn, res, sig_u,
-                                iterations, gate)
+        nis, used = iekf_update(x, p, offsets[k], nav_up[k], zmap, res, sig_u, iterations, gate)
         rejected[k] = 1 if nis > gate else 0
         for c in range(NX):
             est[k, c] = x[c]

@@ -39,7 +39,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import attitude_reference, attitude_sin_cos
+from tanbench.filters.trig import attitude_sin_cos
 from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
 from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell, node_grid
@@ -101,10 +101,16 @@ def work_block(work, n):
                           work.chi[:n], work.logs[:n])
 
 
+# the constants of the likelihood passes, from the measurement sigmas (:func:`beam_constants`):
+# the sonar's variance sigma_U^2, the inverse variance 1 / sigma_d^2 of the distance
+# innovations and the squared innovation ``outside_sigma``^2 charged to a beam off the map
+BeamConstants = namedtuple("BeamConstants", "su2 inv_d2 out2")
+
+
 @nb.njit(cache=True, inline="always")
 def beam_constants(sig_u, sig_d, outside_sigma):
-    """(sig_u^2, 1 / sig_d^2, outside_sigma^2): the per-update constants of the likelihood."""
-    return sig_u * sig_u, 1.0 / (sig_d * sig_d), outside_sigma * outside_sigma
+    """The :class:`BeamConstants` (sig_u^2, 1 / sig_d^2, outside_sigma^2) of the likelihood."""
+    return BeamConstants(sig_u * sig_u, 1.0 / (sig_d * sig_d), outside_sigma * outside_sigma)
 
 
 @nb.njit(cache=True)
@@ -281,12 +287,14 @@ def _density_constants(lik):
 
 
 @nb.njit(cache=True)
-def loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist, with_dist, inv_d2, work, out):
+def loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist, with_dist, work, out):
     """The log-likelihoods of particles ``lo .. lo + n - 1`` of the beams ``vec``
     (``beam_vectors``) into ``out`` (n,), with the block's work arrays ``work``
-    (:func:`work_block`) and distance innovations ``dist`` (2, n); ``att`` the attitude reference
-    of the trigonometry (``trig.attitude_reference``; it does not change the result). Returns
-    the best (smallest) mean d^2 / v per beam."""
+    (:func:`work_block`) and distance innovations ``dist`` (2, n), which enter if ``with_dist``;
+    ``consts`` the :class:`BeamConstants`; ``att`` the attitude reference of the trigonometry
+    (``trig.attitude_reference``; it does not change the result). Returns the best (smallest)
+    mean d^2 / v per beam."""
+    su2, inv_d2, out2 = consts
     inv_nu, half_nu1, student = _density_constants(lik)
     used = vec.shape[0]
     attitude_matrices(x, lo, att, work.dcm)
@@ -300,9 +308,11 @@ def loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist, with_dist, in
 
 
 @nb.njit(cache=True)
-def loglik_loose_pass(x, lo, rows, up, grid, lik, su2, out2, work, out):
+def loglik_loose_pass(x, lo, rows, up, grid, lik, consts, work, out):
     """:func:`loglik_tight_pass` for the loose filter (``x`` (2, M)): ``rows`` the used beam
-    offsets in the navigation frame (``used_offsets``), from the navigation height ``up``."""
+    offsets in the navigation frame (``used_offsets``), from the navigation height ``up``
+    (``consts.inv_d2`` is not used)."""
+    su2, _, out2 = consts
     inv_nu, half_nu1, student = _density_constants(lik)
     used = rows.shape[0]
     start_beam_terms(work)
@@ -314,28 +324,27 @@ def loglik_loose_pass(x, lo, rows, up, grid, lik, su2, out2, work, out):
 
 
 @nb.njit(cache=True)
-def loglik_tight(x, beams, ranges, grid, lik, sig_u, outside_sigma, dist_innov, sig_d, with_dist, ref_pitch,
-                 ref_roll, ref_yaw, out):
+def loglik_tight(x, beams, ranges, grid, lik, sig_u, outside_sigma, dist_innov, sig_d, with_dist, att, out):
     """Fill ``out`` (M,) with each particle's log-likelihood (``x`` (8, M)); return the best chi^2
     per beam. ``grid`` is the map's :class:`~tanbench.terrain.grid.NodeGrid` (with the
     variance grid interleaved for the map-aware density), ``lik`` a
     :class:`Likelihood`; ``dist_innov`` (2, M) enters if
-    ``with_dist``. ``ref_*`` (the navigation attitude) only centre the trigonometry."""
-    su2, inv_d2, out2 = beam_constants(sig_u, sig_d, outside_sigma)
+    ``with_dist``. ``att`` (``trig.attitude_reference`` of the navigation attitude) only centres
+    the trigonometry."""
     m = x.shape[1]
     work = work_block(new_likelihood_work(m, 4 * grid.grids), m)
-    return loglik_tight_pass(x, 0, beam_vectors(beams, ranges), grid, lik, su2, out2,
-                             attitude_reference(ref_pitch, ref_roll, ref_yaw), dist_innov, with_dist, inv_d2, work, out)
+    return loglik_tight_pass(x, 0, beam_vectors(beams, ranges), grid, lik, beam_constants(sig_u, sig_d, outside_sigma),
+                             att, dist_innov, with_dist, work, out)
 
 
 @nb.njit(cache=True)
 def loglik_loose(x, offsets, up, grid, lik, sig_u, outside_sigma, out):
     """Loose filter (``x`` (2, M)): beams projected once with the navigation attitude, ``offsets``
     (m, 3) in m; rows with NaN are beams without a range and are skipped."""
-    su2, _, out2 = beam_constants(sig_u, 1.0, outside_sigma)
     m = x.shape[1]
     work = work_block(new_likelihood_work(m, 4 * grid.grids), m)
-    return loglik_loose_pass(x, 0, used_offsets(offsets), up, grid, lik, su2, out2, work, out)
+    return loglik_loose_pass(x, 0, used_offsets(offsets), up, grid, lik, beam_constants(sig_u, 1.0, outside_sigma),
+                             work, out)
 
 
 # ---- plain-numpy references --------------------------------------------------------------------
@@ -348,39 +357,37 @@ def _beam_logpdf_numpy(d2, v, sig_u, mapaware, kind, nu):
     return -0.5 * d2 / v + norm
 
 
-def _terms_numpy(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, mapaware, kind, nu, used,
-                 dist_chi):
-    h = bilinear_numpy(z, e0, n0, inv_re, inv_rn, pe, pn)
-    mv = bilinear_numpy(mvar, e0, n0, inv_re, inv_rn, pe, pn) if mapaware else np.zeros_like(h)
+def _terms_numpy(pe, pn, pu, zmap, mvar, lik, sig_u, outside_sigma, used, dist_chi):
+    h = bilinear_numpy(*zmap, pe, pn)
+    mv = bilinear_numpy(mvar, *zmap[1:], pe, pn) if lik.mapaware else np.zeros_like(h)
     off = np.isnan(h) | np.isnan(mv)
     v = np.where(off, sig_u**2, sig_u**2 + np.nan_to_num(mv))
     d2 = np.where(off, outside_sigma**2 * sig_u**2, (pu - np.nan_to_num(h)) ** 2)
-    ll = _beam_logpdf_numpy(d2, v, sig_u, mapaware, kind, nu).sum(axis=1)
+    ll = _beam_logpdf_numpy(d2, v, sig_u, lik.mapaware, lik.kind, lik.nu).sum(axis=1)
     chi = (d2 / v).sum(axis=1)
     best = (chi / used).min() if used else np.inf
     return ll - 0.5 * dist_chi, best
 
 
-def loglik_tight_numpy(x, beams, ranges, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, dist_innov, sig_d,
-                       mapaware=False, kind=LIK_GAUSSIAN, nu=4.0):
-    """Plain-numpy reference of :func:`loglik_tight` (``mvar``: the variance grid, used if
-    ``mapaware``; ``dist_innov`` (2, M) or None): (loglik (M,), best chi^2 per beam)."""
+def loglik_tight_numpy(x, beams, ranges, zmap, mvar, lik, sig_u, outside_sigma, dist_innov, sig_d):
+    """Plain-numpy reference of :func:`loglik_tight`: the map as its ``MapArgs`` ``zmap``
+    (``Map.kernel_args()``) and the variance grid ``mvar`` (used if ``lik.mapaware``) where the
+    kernel takes them interleaved in a ``NodeGrid``; ``dist_innov`` (2, M) or None (no distance
+    innovation): (loglik (M,), best chi^2 per beam)."""
     c = dcm_body_to_nav_numpy(x[PITCH], x[ROLL], x[YAW])  # (M, 3, 3)
     ok = ~np.isnan(ranges)
     vec = beams[ok] * ranges[ok][:, None]  # (m', 3)
     p = x[[E, N, U]].T[:, None, :] + np.einsum("mij,bj->mbi", c, vec)  # (M, m', 3)
     dist_chi = 0.0 if dist_innov is None else (dist_innov**2).sum(axis=0) / sig_d**2
-    return _terms_numpy(p[..., 0], p[..., 1], p[..., 2], z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma,
-                        mapaware, kind, nu, ok.sum(), dist_chi)
+    return _terms_numpy(p[..., 0], p[..., 1], p[..., 2], zmap, mvar, lik, sig_u, outside_sigma, ok.sum(), dist_chi)
 
 
-def loglik_loose_numpy(x, offsets, up, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, mapaware=False,
-                       kind=LIK_GAUSSIAN, nu=4.0):
-    """Plain-numpy reference of :func:`loglik_loose`: (loglik (M,), best chi^2 per beam)."""
+def loglik_loose_numpy(x, offsets, up, zmap, mvar, lik, sig_u, outside_sigma):
+    """Plain-numpy reference of :func:`loglik_loose` (the map as in :func:`loglik_tight_numpy`):
+    (loglik (M,), best chi^2 per beam)."""
     ok = ~np.isnan(offsets[:, 2])
     o = offsets[ok]
     pe = x[0][:, None] + o[:, 0]
     pn = x[1][:, None] + o[:, 1]
     pu = np.broadcast_to(up + o[:, 2], pe.shape)
-    return _terms_numpy(pe, pn, pu, z, mvar, e0, n0, inv_re, inv_rn, sig_u, outside_sigma, mapaware, kind, nu,
-                        ok.sum(), 0.0)
+    return _terms_numpy(pe, pn, pu, zmap, mvar, lik, sig_u, outside_sigma, ok.sum(), 0.0)

@@ -64,14 +64,26 @@ KalmanOutputs = namedtuple("KalmanOutputs", "en yaw bias var var_yaw ess reinit 
 
 LOOSE_COLS = np.array([0, 1], dtype=np.int64)  # the states (rows) the regularisation jitters
 
+# one loose update's motion (propagate_loose): the displacement (d_e, d_n) the particles move
+# by, the position noise std and the heading std (rad) behind the cross-track noise
+LooseMotion = namedtuple("LooseMotion", "d_e d_n sig_pos sig_heading")
+
+# the buffers of the loose particle passes: the noise rows (at least 3 * block), the
+# likelihood's work arrays (likelihood.new_likelihood_work; their size is the block) and the
+# particles' log-likelihoods (M,), which the passes fill
+LooseBuffers = namedtuple("LooseBuffers", "noise work ll")
+
 
 @nb.njit(cache=True)
-def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading, offsets, up, grid, su2, out2, lik,
-                              noise_buf, work, ll):
-    """One loose update's particle passes, block by block (``work``'s size): draw the three
-    noise rows (east, north, cross-track), move the particles by (``d_e``, ``d_n``) if
-    ``propagate`` (:func:`~tanbench.filters.propagate.propagate_loose`) and weigh them into
-    ``ll`` (:func:`~tanbench.filters.likelihood.loglik_loose_pass`). Returns the best chi^2 per beam."""
+def propagate_and_weigh_loose(x, rng, propagate, motion, offsets, up, grid, lik, consts, bufs):
+    """One loose update's particle passes, block by block (the size of ``bufs.work``): draw the
+    three noise rows (east, north, cross-track), move the particles by ``motion`` (a
+    :class:`LooseMotion`) if ``propagate`` (:func:`~tanbench.filters.propagate.propagate_loose`)
+    and weigh them into ``bufs.ll`` (:func:`~tanbench.filters.likelihood.loglik_loose_pass`,
+    ``consts`` its :class:`~tanbench.filters.likelihood.BeamConstants`). Returns the best chi^2
+    per beam."""
+    d_e, d_n, sig_pos, sig_heading = motion
+    noise_buf, work, ll = bufs
     rows = used_offsets(offsets)
     m = x.shape[1]
     block = work.norm.shape[0]
@@ -82,7 +94,7 @@ def propagate_and_weigh_loose(x, rng, propagate, d_e, d_n, sig_pos, sig_heading,
             noise = noise_buf[:3 * n].reshape((3, n))
             fill_normals(rng, noise)
             propagate_loose(x, d_e, d_n, noise, sig_pos, sig_heading, lo)
-        best = min(best, loglik_loose_pass(x, lo, rows, up, grid, lik, su2, out2, work_block(work, n), ll[lo:lo + n]))
+        best = min(best, loglik_loose_pass(x, lo, rows, up, grid, lik, consts, work_block(work, n), ll[lo:lo + n]))
     return best
 
 
@@ -116,14 +128,13 @@ def loose_filter_loop(x, rng, track, offsets, grid, settings, out):
     good = 0
     consistent_chi = (0.5 * div.sigma) ** 2
     plain = Likelihood(False, 0, 4.0)  # the fix-only loop weighs with the plain Gaussian
-    noise = np.empty(3 * min(BLOCK, m))
-    work = new_likelihood_work(min(BLOCK, m), 4 * grid.grids)
-    su2, _, out2 = beam_constants(model.sig_u, 1.0, model.outside_sigma)
+    bufs = LooseBuffers(np.empty(3 * min(BLOCK, m)), new_likelihood_work(min(BLOCK, m), 4 * grid.grids), ll)
+    consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
     for k in range(steps):
         d_e = d0[k - 1, 0] if k > 0 else 0.0
         d_n = d0[k - 1, 1] if k > 0 else 0.0
-        best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, model.sig_pos, model.sig_heading, offsets[k],
-                                         nav_up[k], grid, su2, out2, plain, noise, work, ll)
+        best = propagate_and_weigh_loose(x, rng, k > 0, LooseMotion(d_e, d_n, model.sig_pos, model.sig_heading),
+                                         offsets[k], nav_up[k], grid, plain, consts, bufs)
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, -1, 0.0, mean, v, cov)
@@ -248,9 +259,8 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
     nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
     zero_noise = np.zeros((6, 1))
     dist = np.zeros((2, 1))
-    noise = np.empty(3 * min(BLOCK, m))
-    work = new_likelihood_work(min(BLOCK, m), 4 * grid.grids)
-    su2, _, out2 = beam_constants(model.sig_u, 1.0, model.outside_sigma)
+    bufs = LooseBuffers(np.empty(3 * min(BLOCK, m)), new_likelihood_work(min(BLOCK, m), 4 * grid.grids), ll)
+    consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
     nav[E, 0] = out_en[0, 0]
     nav[N, 0] = out_en[0, 1]
     nav[YAW, 0] = nav_yaw[0]
@@ -294,8 +304,8 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
             rot[i, 1] = s * offsets[k, i, 0] + c * offsets[k, i, 1]
             rot[i, 2] = offsets[k, i, 2]
         # the particles move (k > 0) and are weighed
-        best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, sig_pos, sig_heading, rot, nav_up[k], grid,
-                                         su2, out2, lik, noise, work, ll)
+        best = propagate_and_weigh_loose(x, rng, k > 0, LooseMotion(d_e, d_n, sig_pos, sig_heading), rot, nav_up[k],
+                                         grid, lik, consts, bufs)
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, -1, 0.0, mean, v, cov)

@@ -199,7 +199,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     dist_block = np.zeros((2, block))
     noise_buf = np.empty(3 * block)
     work = new_likelihood_work(block, 4 * grid.grids)
-    su2, _, out2 = beam_constants(model.sig_u, 1.0, model.outside_sigma)
+    consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
     nav[E, 0] = out_en[0, 0]
     nav[N, 0] = out_en[0, 1]
     nav[YAW, 0] = nav_yaw[0]
@@ -241,7 +241,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
         best = np.inf
         for lo in range(0, m, block):
             n = min(block, m - lo)
-            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist_block[:, :n], False, 0.0,
+            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist_block[:, :n], False,
                                                work_block(work, n), ll[lo:lo + n]))
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)

@@ -27,13 +27,14 @@ Only ``DIST_NAVIGATION`` leaves a per-particle innovation for the likelihood.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import attitude_reference, attitude_sin_cos, sin_cos_about
+from tanbench.filters.trig import LEVEL, attitude_sin_cos, sin_cos_about
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, EU_VX, EU_VY, EU_WX, EU_WZ,
                                             JAXE, JAXN, JAZE, JAZN, SX, SZ)
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -60,20 +61,35 @@ def _block_views(x, lo, noise, dist_innov):
             (dist_innov[0], dist_innov[1]))
 
 
+# what every particle of a propagation pass shares over one interval (:func:`shared_motion`):
+# the navigation system's displacement (d0e, d0n), the increments of up, pitch and roll, the
+# noise stds of up and of the attitude angles, and whether the distance innovations of
+# ``DIST_NAVIGATION`` are kept (``navigation``)
+SharedMotion = namedtuple("SharedMotion", "d0e d0n dup dpitch droll sig_up sig_att navigation")
+
+
+@nb.njit(cache=True, inline="always")
+def shared_motion(inc, sig_up, sig_att, dist_mode):
+    """The :class:`SharedMotion` of one row ``inc`` of the increments table."""
+    return SharedMotion(inc[D0E], inc[D0N], inc[DUP], inc[DPITCH], inc[DROLL], sig_up, sig_att,
+                        dist_mode == DIST_NAVIGATION)
+
+
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _move_particle(rows, noise, dist, j, de, dn, dup, dpitch, droll, dyaw, sig_up, sig_att, navigation, d0e, d0n):
+def _move_particle(rows, noise, dist, j, de, dn, dyaw, shared):
     """Particle ``j`` of a block (views from :func:`_block_views`) moves by (de, dn) (noise
-    included), its up, pitch, roll and yaw by their increments plus noise; the distance
-    innovations of ``DIST_NAVIGATION`` go to ``dist``. The two readings of Eq. 1 share it."""
+    included), its yaw by ``dyaw`` plus noise, its up, pitch and roll by the increments of
+    ``shared`` (:class:`SharedMotion`) plus noise; the distance innovations of
+    ``DIST_NAVIGATION`` go to ``dist``. The two readings of Eq. 1 share it."""
     rows[0][j] += de
     rows[1][j] += dn
-    rows[2][j] += dup + sig_up * noise[2][j]
-    rows[3][j] += dpitch + sig_att * noise[3][j]
-    rows[4][j] += droll + sig_att * noise[4][j]
-    rows[5][j] += dyaw + sig_att * noise[5][j]
-    if navigation:
-        dist[0][j] = d0e - de
-        dist[1][j] = d0n - dn
+    rows[2][j] += shared.dup + shared.sig_up * noise[2][j]
+    rows[3][j] += shared.dpitch + shared.sig_att * noise[3][j]
+    rows[4][j] += shared.droll + shared.sig_att * noise[4][j]
+    rows[5][j] += dyaw + shared.sig_att * noise[5][j]
+    if shared.navigation:
+        dist[0][j] = shared.d0e - de
+        dist[1][j] = shared.d0n - dn
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -95,11 +111,10 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
     ``dist_innov``): the filter loops run their particle passes over blocks of the cloud.
     """
     s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
-    d0e, d0n = inc[D0E], inc[D0N]
+    shared = shared_motion(inc, sig_up, sig_att, dist_mode)
+    d0e, d0n = shared.d0e, shared.d0n
     jaxe, jaxn, jaze, jazn = inc[JAXE], inc[JAXN], inc[JAZE], inc[JAZN]
     dyaw, sx, sz = inc[DYAW], inc[SX], inc[SZ]
-    dup, dpitch, droll = inc[DUP], inc[DPITCH], inc[DROLL]
-    navigation = dist_mode == DIST_NAVIGATION
     rows, nz, dist = _block_views(x, lo, noise, dist_innov)
     e, nn, u, pitch, roll, yaw, bxs, bzs = rows
     n_e, n_n = nz[0], nz[1]
@@ -111,8 +126,7 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
         un = d0n + bx * jaxn - bz * jazn
         de = c * ue - s * un + sig_pos * n_e[j]
         dn = s * ue + c * un + sig_pos * n_n[j]
-        _move_particle(rows, nz, dist, j, de, dn, dup, dpitch, droll, dyaw + bx * sx - bz * sz, sig_up,
-                       sig_att, navigation, d0e, d0n)
+        _move_particle(rows, nz, dist, j, de, dn, dyaw + bx * sx - bz * sz, shared)
 
 
 def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode):
@@ -139,8 +153,7 @@ def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dis
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, ref_pitch=0.0,
-                          ref_roll=0.0, ref_yaw=0.0, lo=0):
+def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, att=LEVEL, lo=0):
     """Eq. 1 read as one Euler step of length ``dt`` (the sampling time), Algorithm 1 line 4.
 
     ``u`` = (v_x, v_y, w_x, w_z): the DVL body velocity and body turn rates
@@ -150,25 +163,22 @@ def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_m
     cos th_j * dt``; up, pitch and roll follow the navigation system (``inc``: Eq. 1's 0_3,
     as in :func:`propagate_tight`). Noise and distance innovations as there; the
     navigation distance of ``DIST_NAVIGATION`` is the navigation system's displacement.
-    ``ref_*`` (rad) only centre the trigonometry (``trig.attitude_sin_cos``): the navigation
-    attitude at the interval start, or the cloud's; they do not change the motion. Particles
+    ``att`` (``trig.attitude_reference``; ``LEVEL``, the level attitude heading north, if not
+    given) only centres the trigonometry (``trig.attitude_sin_cos``): the navigation attitude at
+    the interval start, or the cloud's; it does not change the motion. Particles
     ``lo .. lo + n - 1`` move, as in :func:`propagate_tight`.
     """
-    att0 = attitude_reference(ref_pitch, ref_roll, ref_yaw)
     vx, vy, wx, wz = u[EU_VX] * dt, u[EU_VY] * dt, u[EU_WX], u[EU_WZ]
-    d0e, d0n = inc[D0E], inc[D0N]
-    dup, dpitch, droll = inc[DUP], inc[DPITCH], inc[DROLL]
-    navigation = dist_mode == DIST_NAVIGATION
+    shared = shared_motion(inc, sig_up, sig_att, dist_mode)
     rows, nz, dist = _block_views(x, lo, noise, dist_innov)
     e, nn, u, pitch, roll, yaw, bxs, bzs = rows
     n_e, n_n = nz[0], nz[1]
     for j in range(noise.shape[1]):
-        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att0)
+        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att)
         de = (cg * cp - st * sg * sp) * vx - ct * sp * vy + sig_pos * n_e[j]
         dn = (cg * sp + st * sg * cp) * vx + ct * cp * vy + sig_pos * n_n[j]
         yaw_rate = (-sg * (wx - bxs[j]) + cg * (wz - bzs[j])) / ct
-        _move_particle(rows, nz, dist, j, de, dn, dup, dpitch, droll, yaw_rate * dt, sig_up, sig_att,
-                       navigation, d0e, d0n)
+        _move_particle(rows, nz, dist, j, de, dn, yaw_rate * dt, shared)
 
 
 def propagate_tight_euler_numpy(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode):

@@ -40,13 +40,14 @@ METRICS = {"msd": MSD, "mad": MAD}
 
 
 @nb.njit(cache=True)
-def profile_surface(pe, pn, ph, pivot_e, pivot_n, half_cells, step, deltas, z, e0, n0, inv_re, inv_rn,
-                    msd_out, mad_out):
+def profile_surface(pe, pn, ph, pivot_e, pivot_n, half_cells, step, deltas, zmap, msd_out, mad_out):
     """Score every candidate (delta_d, dy_i, dx_j) = (deltas[d], (i - half) step, (j - half) step).
 
-    ``pe, pn, ph`` (P,) profile points and measured heights. Fills ``msd_out`` and ``mad_out``
-    (D, 2 half + 1, 2 half + 1) with the demeaned MSD and MAD; +inf where a point is off the map.
+    ``pe, pn, ph`` (P,) profile points and measured heights, ``zmap`` the map's ``MapArgs``.
+    Fills ``msd_out`` and ``mad_out`` (D, 2 half + 1, 2 half + 1) with the demeaned MSD and MAD;
+    +inf where a point is off the map.
     """
+    z, e0, n0, inv_re, inv_rn = zmap
     npts = pe.shape[0]
     side = 2 * half_cells + 1
     r = np.empty(npts)
@@ -84,7 +85,7 @@ def profile_surface(pe, pn, ph, pivot_e, pivot_n, half_cells, step, deltas, z, e
                 mad_out[d, i, j] = ab / npts
 
 
-def profile_surface_numpy(pe, pn, ph, pivot_e, pivot_n, half_cells, step, deltas, z, e0, n0, inv_re, inv_rn):
+def profile_surface_numpy(pe, pn, ph, pivot_e, pivot_n, half_cells, step, deltas, zmap):
     """Plain-numpy reference of :func:`profile_surface`: returns (msd, mad)."""
     off = (np.arange(2 * half_cells + 1) - half_cells) * step
     dx, dy = np.meshgrid(off, off)  # [i, j] -> (dx_j, dy_i)
@@ -95,7 +96,7 @@ def profile_surface_numpy(pe, pn, ph, pivot_e, pivot_n, half_cells, step, deltas
         ue, un = pe - pivot_e, pn - pivot_n
         qe = pivot_e + c * ue - s * un + dx[..., None]
         qn = pivot_n + s * ue + c * un + dy[..., None]
-        r = ph - bilinear_numpy(z, e0, n0, inv_re, inv_rn, qe, qn)
+        r = ph - bilinear_numpy(*zmap, qe, qn)
         r = r - r.mean(axis=-1, keepdims=True)
         bad = np.isnan(r).any(axis=-1)
         msd[d] = np.where(bad, np.inf, (r**2).mean(axis=-1))
@@ -183,7 +184,7 @@ def tercom_loop(d0, offsets, nav_up, start_e, start_n, zmap, settings, out):
     start; ``zmap`` the map's ``MapArgs``; ``settings`` a :class:`TercomSettings`; fills ``out``
     (:class:`TercomOutputs`): ``est`` (K, 3) (east, north, heading correction), ``var`` (K, 3),
     ``fixes`` (K,) (1 where a fix was accepted)."""
-    z, e0, n0, inv_re, inv_rn = zmap
+    _, _, _, inv_re, inv_rn = zmap
     (profile_len, interval, metric, headings, window_max, fix_std, var0_pos, var0_heading, q_pos, q_heading, sig_u,
      div_sigma) = settings
     est, var, fixes = out
@@ -248,8 +249,7 @@ def tercom_loop(d0, offsets, nav_up, start_e, start_n, zmap, settings, out):
                 side = 2 * half + 1
                 msd = np.empty((deltas.shape[0], side, side))
                 mad = np.empty((deltas.shape[0], side, side))
-                profile_surface(pe[:npts], pn[:npts], ph[:npts], pc_e, pc_n, half, res, deltas,
-                                z, e0, n0, inv_re, inv_rn, msd, mad)
+                profile_surface(pe[:npts], pn[:npts], ph[:npts], pc_e, pc_n, half, res, deltas, zmap, msd, mad)
                 score = msd if metric == MSD else mad
                 best, bd, bi, bj = _best(score)
                 cm = surface_likelihood_moments(msd, deltas, half, res, count, sig_u)
@@ -268,7 +268,7 @@ def tercom_loop(d0, offsets, nav_up, start_e, start_n, zmap, settings, out):
                     fsd = np.empty((fd.shape[0], 2 * fh + 1, 2 * fh + 1))
                     fad = np.empty((fd.shape[0], 2 * fh + 1, 2 * fh + 1))
                     profile_surface(pe[:npts] + cx, pn[:npts] + cy, ph[:npts], pc_e + cx, pc_n + cy, fh, fstep,
-                                    fd, z, e0, n0, inv_re, inv_rn, fsd, fad)
+                                    fd, zmap, fsd, fad)
                     fbest, fbd, fbi, fbj = _best(fsd if metric == MSD else fad)
                     fm = surface_likelihood_moments(fsd, fd, fh, fstep, count, sig_u)
                     if fsd[fbd, fbi, fbj] < consistent:

@@ -232,7 +232,7 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     mean = np.empty(N_TIGHT)
     v = np.empty(N_TIGHT)
     cov = np.empty((2, 2))
-    su2, inv_d2, out2 = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
+    consts = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
     with_dist = model.dist_mode == DIST_NAVIGATION
     bad = 0
     locked = False  # the cloud has converged since the last (re)initialisation
@@ -258,15 +258,16 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
                 noise = noise_all[:6]
                 if readings.propagation != 0:
                     propagate_tight_euler(x, euler_in[k - 1], readings.dt, inc[k - 1], noise, model.sig_pos,
-                                          model.sig_up, model.sig_att, model.dist_mode, dist, nav_pitch[k - 1],
-                                          nav_roll[k - 1], nav_yaw[k - 1] + yaw_off, lo)
+                                          model.sig_up, model.sig_att, model.dist_mode, dist,
+                                          attitude_reference(nav_pitch[k - 1], nav_roll[k - 1],
+                                                             nav_yaw[k - 1] + yaw_off), lo)
                 else:
                     propagate_tight(x, inc[k - 1], nav_yaw[k - 1], noise, model.sig_pos, model.sig_up,
                                     model.sig_att, model.dist_mode, dist, yaw_off, lo)
                 if walk:
                     walk_biases(x, noise_all[6], noise_all[7], model.sig_bias, lo)
-            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, su2, out2, att, dist, with_dist and k > 0,
-                                               inv_d2, work_block(work, n), ll[lo:lo + n]))
+            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist, with_dist and k > 0,
+                                               work_block(work, n), ll[lo:lo + n]))
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)

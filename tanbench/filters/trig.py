@@ -88,6 +88,10 @@ def attitude_reference(ref_pitch, ref_roll, ref_yaw):
             ref_yaw, math.sin(ref_yaw), math.cos(ref_yaw))
 
 
+# attitude_reference(0, 0, 0), the level attitude heading north: each angle with its sine and cosine
+LEVEL = (0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0)
+
+
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def attitude_sin_cos(pitch, roll, yaw, att):
     """(sin, cos) of a particle's pitch, roll and yaw, each as the reference ``att``

@@ -79,7 +79,7 @@ def run_loose(ctx) -> MethodOutput:
     from tanbench.filters.likelihood import BLOCK, beam_constants, new_likelihood_work
     from tanbench.filters.loose import (LOOSE_COLS, _open_window, position_reset, propagate_and_weigh_loose,
                                         reopen_kf)
-    from tanbench.filters.loose import LooseKalman, LooseModel
+    from tanbench.filters.loose import LooseBuffers, LooseKalman, LooseModel, LooseMotion
     from tanbench.filters.propagate import DIST_NONE, propagate_tight
     from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
     from tanbench.filters.rng import loop_rng
@@ -160,7 +160,7 @@ def run_loose(ctx) -> MethodOutput:
         x8[YAW] = navp[YAW, 0] + x[2]
         vec = beam_vectors(beams_body, ranges_k[k_])
         att = attitude_reference(nav_pitch_k[k_], nav_roll_k[k_], navp[YAW, 0])
-        return loglik_tight_pass(x8, 0, vec, grid, lik, su2, out2, att, dist8, False, 0.0, work8, ll)
+        return loglik_tight_pass(x8, 0, vec, grid, lik, consts, att, dist8, False, work8, ll)
 
     nav_yaw, nav_up = nav.yaw[upd], nav.pos[upd, 2]
     out_en, var, ess_out = np.empty((steps, 2)), np.empty((steps, 2)), np.empty(steps)
@@ -179,9 +179,8 @@ def run_loose(ctx) -> MethodOutput:
     _open_window(m_prior, p_prior, out_en[0, 0], out_en[0, 1], half)
     navp = np.zeros((N_TIGHT, 1))
     zero_noise, dist = np.zeros((6, 1)), np.zeros((2, 1))
-    noise = np.empty(3 * min(BLOCK, m))
-    work = new_likelihood_work(min(BLOCK, m), 4 * grid.grids)
-    su2, _, out2 = beam_constants(model.sig_u, 1.0, model.outside_sigma)
+    bufs = LooseBuffers(np.empty(3 * min(BLOCK, m)), new_likelihood_work(min(BLOCK, m), 4 * grid.grids), ll)
+    consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
     navp[E, 0], navp[N, 0], navp[YAW, 0] = out_en[0, 0], out_en[0, 1], nav_yaw[0]
     bad = good = since_fix = rejections = 0
     first_fix, locked = True, False
@@ -220,8 +219,8 @@ def run_loose(ctx) -> MethodOutput:
                 move(xp, k)
             best = weigh(k)
         else:
-            best = propagate_and_weigh_loose(x, rng, k > 0, d_e, d_n, sig_pos, sig_heading, rot, nav_up[k], grid,
-                                             su2, out2, lik, noise, work, ll)
+            best = propagate_and_weigh_loose(x, rng, k > 0, LooseMotion(d_e, d_n, sig_pos, sig_heading), rot,
+                                             nav_up[k], grid, lik, consts, bufs)
         if o.tempering:
             stages, remaining = 1, 1.0
             while _ess(logw + remaining * ll) < o.tempering_ess * m and stages < o.tempering_stages:
@@ -238,8 +237,8 @@ def run_loose(ctx) -> MethodOutput:
                 resample_and_regularise(x, wn, logw, 0.0, rng, rs, x.shape[0], math.sqrt(v[0] + v[1]), uni, idx,
                                         scratch)
                 best = weigh(k) if hd else propagate_and_weigh_loose(
-                    x, rng, False, 0.0, 0.0, sig_pos, sig_heading, rot, nav_up[k], grid, su2, out2, lik, noise,
-                    work, ll)
+                    x, rng, False, LooseMotion(0.0, 0.0, sig_pos, sig_heading), rot, nav_up[k], grid, lik, consts,
+                    bufs)
                 stages += 1
             ll *= remaining
             stages_out[k] = stages

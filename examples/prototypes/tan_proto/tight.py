@@ -193,7 +193,7 @@ def run_tight(ctx, sensor: str) -> MethodOutput:
     noise, dist = np.empty((6, m)), np.zeros((2, m))
     work = work_block(new_likelihood_work(m, 4 * grid.grids), m)
     mean, v, cov = np.empty(N_TIGHT), np.empty(N_TIGHT), np.empty((2, 2))
-    su2, inv_d2, out2 = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
+    consts = beam_constants(model.sig_u, model.sig_d, model.outside_sigma)
     with_dist = model.dist_mode == DIST_NAVIGATION
     cols = [E, N, YAW, BX, BZ]
     d = len(cols)
@@ -231,7 +231,7 @@ def run_tight(ctx, sensor: str) -> MethodOutput:
         regularise_after_resample(mu_cov, spread)
 
     def loglik(k, vec, att, use_dist):
-        return loglik_tight_pass(x, 0, vec, grid, lik, su2, out2, att, dist, use_dist, inv_d2, work, ll)
+        return loglik_tight_pass(x, 0, vec, grid, lik, consts, att, dist, use_dist, work, ll)
 
     for k in range(steps):
         vec = beam_vectors(beams, ranges[k])
