@@ -125,15 +125,19 @@ def _load_builtins() -> None:
 
 
 def names() -> tuple[str, ...]:
-    """The built-in and installed methods' names, built-ins first in registration order."""
+    """The built-in and installed methods' names: the built-ins by seed id, then the others in
+    registration order."""
     _load_builtins()
     _load_entry_points()
-    return tuple(_REGISTRY)
+    return builtin_names() + tuple(n for n, r in _REGISTRY.items() if not r.builtin)
 
 
 def builtin_names() -> tuple[str, ...]:
+    """The built-in methods' names in a fixed order, by seed id: never the order their modules
+    happened to be imported in (a test that imported ``tanbench.methods.mpf`` first once put
+    mpf-dvl at the front, and every index taken from this tuple moved with it)."""
     _load_builtins()
-    return tuple(n for n, r in _REGISTRY.items() if r.builtin)
+    return tuple(sorted((n for n, r in _REGISTRY.items() if r.builtin), key=lambda n: _REGISTRY[n].seed_id))
 
 
 _entry_points_loaded = False
