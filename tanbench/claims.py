@@ -4,13 +4,14 @@ Used by ``tests/test_paper_claims.py`` (on the committed ``results/zhou2017``) a
 report (``tanbench report``). Methods of one run share their vehicle data, and so do the
 area-A cells (same world, common random numbers), so comparisons between them are
 paired; area A against area B or the vehicle run are different worlds, so those are
-unpaired. The trend and ordering claims are about the paper's statistic, the **mean**
-final error, so they are tested on the mean: a one-sided permutation test of the change of
-the mean (paired: sign flips of the per-run differences; unpaired: permuted labels;
-:func:`tanbench.inference.permutation_p`), with the lost-run counts (``diverged``) reported
-beside. The rank tests used before (paired Wilcoxon signed-rank, i.e. the pseudo-median;
-Mann-Whitney U) are still computed and reported where their verdict differs; they are not
-counted. Level: 1 %.
+unpaired. The trend and ordering claims are counted on the tests they were set with before
+any result was seen: one-sided rank tests (paired Wilcoxon signed-rank, i.e. the
+pseudo-median; unpaired Mann-Whitney U). The paper reports means, so every comparison also
+prints the test of the mean (a one-sided permutation test of the change of the mean, paired:
+sign flips of the per-run differences, unpaired: permuted labels;
+:func:`tanbench.inference.permutation_p`) with the lost-run counts (``diverged``); where it
+disagrees the line says so, and it is reported, not counted (issue 22 asked for the mean;
+the project counts a claim's original statistic). Level: 1 %.
 """
 
 from __future__ import annotations
@@ -92,8 +93,8 @@ def unpaired_greater(a: pd.Series, b: pd.Series) -> float:
 
 
 def rank_greater(a: pd.Series, b: pd.Series, paired: bool) -> float:
-    """The rank test reported beside (not counted): paired Wilcoxon signed-rank (pseudo-median),
-    unpaired Mann-Whitney U, one-sided."""
+    """The claims' counted test, as set: paired Wilcoxon signed-rank (pseudo-median), unpaired
+    Mann-Whitney U, one-sided."""
     if paired:
         a, b = a.align(b, join="inner")
         if len(a) < 5 or np.allclose((a - b).to_numpy(), 0):
@@ -120,11 +121,10 @@ def _greater(claim: Claim, label: str, a, b, paired=True, unit="m"):
     else:
         p = unpaired_greater(a, b)
         test = f"permutation test of the mean, n={len(a)}/{len(b)}"
-    other = ""
-    if (rank < ALPHA) != (p < ALPHA):
-        other = (f" [{'Wilcoxon signed-rank (pseudo-median)' if paired else 'Mann-Whitney U'} p={rank:.2g} "
-                 f"disagrees; not counted]")
-    claim.check(p < ALPHA, f"{label}: mean {a.mean():.1f} vs {b.mean():.1f} {unit} ({test}, p={p:.2g}{lost}){other}")
+    rank_test = "Wilcoxon signed-rank (pseudo-median)" if paired else "Mann-Whitney U"
+    other = f" [the {test} disagrees: reported, not counted]" if (rank < ALPHA) != (p < ALPHA) else ""
+    claim.check(rank < ALPHA, f"{label}: mean {a.mean():.1f} vs {b.mean():.1f} {unit} ({rank_test} p={rank:.2g}, "
+                              f"counted; {test}, p={p:.2g}{lost}){other}")
 
 
 def _cell_id(runs: pd.DataFrame, **params) -> str:

@@ -228,9 +228,10 @@ def write_report(directory, discussion: Path | None = None, literal: Path | None
         parts += ["", fitted_section(Path(fitted), Path(literal) if literal is not None else None, directory)]
     parts += ["", "## The paper's claims as set (section 10.1 of docs/model.md; counted as before)", "",
               "Each claim is a test in `tests/test_paper_claims.py` on these results (one-sided tests at 1 %; "
-              "the trends and orderings test the paper's statistic, the mean, by permutation tests: paired "
-              "where runs share their vehicle data; lost runs reported beside; a rank test (Wilcoxon / "
-              "Mann-Whitney) that disagrees is reported and not counted).", ""]
+              "the trends and orderings are counted on the rank tests they were set with (Wilcoxon signed-rank "
+              "where runs share their vehicle data, Mann-Whitney U otherwise); the test of the paper's "
+              "statistic, the mean (permutation tests), is printed beside with the lost runs, and where it "
+              "disagrees it is reported, not counted).", ""]
     if lit_claims is not None:
         parts += ["| claim | statement | literal profile | recommended profile |", "|---|---|---|---|"]
         lit_by_key = {c.key: c for c in lit_claims}
