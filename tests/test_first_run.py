@@ -25,10 +25,16 @@ def test_plan_estimate_includes_compilation_and_the_load():
     workers = min(2, len(plan.tasks))
     idle = plan.estimate_parts(load=0.0, warm=False)
     share_one, share_all = min(1.0, cores / 1.0), min(1.0, cores / workers)
+    processes = planning.compile_processes(2)
     compile_s = planning.compile_seconds(sweep.spec.methods, sweep.spec.methods)
     assert compile_s == pytest.approx(planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["tight"]
                                       + planning.COMPILE_FAMILY_S["loose"])  # tight-sbe shares tight-dvl's kernels
-    assert idle["compile"] == pytest.approx(compile_s / share_one + planning.WARM_START_S / share_all)
+    side = planning.compile_seconds(sweep.spec.methods, sweep.spec.methods, processes=processes)
+    if processes > 1:  # tight's group and loose's side by side: the longer one, then loading the other's
+        assert side == pytest.approx(planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["tight"]
+                                     + planning.COMPILE_JOIN_S)
+    share_compile = min(1.0, cores / processes)
+    assert idle["compile"] == pytest.approx(side / share_compile + planning.WARM_START_S / share_all)
     assert idle["tasks"] == pytest.approx(tasks / (workers * share_all))
     assert idle["fixed"] == pytest.approx(planning.FIXED_S / share_one)
     warm = plan.estimate_parts(load=0.0, warm=True)
@@ -57,6 +63,47 @@ def test_warm_up_compiles_and_marks_only_the_sweeps_methods(tmp_path, monkeypatc
     assert planning.compile_seconds(sweep_methods) == 0.0
     assert planning.compile_seconds(("tight-dvl", "pmf-dvl")) == pytest.approx(
         planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["pmf"])
+
+
+def test_compile_groups_split_whole_families_longest_first(tmp_path, monkeypatch):
+    """Cold methods go to side-by-side compile groups by family (a family's methods share kernels),
+    the longest family first, each to the least loaded group; the parent's group is the longest."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    methods = ("tight-dvl", "tight-sbe", "loose-dvl", "my.module:run")
+    assert planning.compile_groups(methods, 1) == [["tight-dvl", "tight-sbe", "loose-dvl"]]
+    assert planning.compile_groups(methods, 2) == [["tight-dvl", "tight-sbe"], ["loose-dvl"]]
+    assert planning.compile_groups(methods, 8) == [["tight-dvl", "tight-sbe"], ["loose-dvl"]]
+    five = ("tight-dvl", "loose-dvl", "pmf-dvl", "mpf-dvl", "ekf-dvl")  # 36, 19.9, 13.5, 8.4, 7.5 s in turn
+    groups = planning.compile_groups(five, 2)  # 36 + 7.5 = 43.5 s against 19.9 + 13.5 + 8.4 = 41.8 s
+    assert groups == [["tight-dvl", "mpf-dvl"], ["loose-dvl", "pmf-dvl", "ekf-dvl"]]
+    assert planning.compile_groups(methods, 2, cold=[]) == []
+    assert planning.compile_seconds(methods, cold=[], processes=2) == 0.0
+    busy = planning.compile_seconds(five, five, processes=2)
+    assert busy == pytest.approx(planning.COMPILE_SHARED_S + planning.COMPILE_JOIN_S + sum(
+        planning.COMPILE_FAMILY_S[f] for f in ("tight", "mpf")))
+
+
+def test_share_of_each_compiling_process(monkeypatch):
+    """From the share one process gets now, the share each of k busy processes will get: the other
+    load the first implies, shared with k of ours."""
+    monkeypatch.setattr(planning, "default_workers", lambda: 2)
+    assert planning.share_of_each(2, 1.0) == 1.0
+    assert planning.share_of_each(1, 0.5) == pytest.approx(0.5)
+    assert planning.share_of_each(2, 0.5) == pytest.approx(2 / 5)  # 3 others + 2 of ours on 2 cores
+    assert planning.share_of_each(3, 1.0) == pytest.approx(2 / 3)
+
+
+def test_side_by_side_warm_up_of_one_group_stays_in_this_process(monkeypatch):
+    """One group (or one process): the warm-up runs here, once, on every method; no helper starts."""
+    from tanbench.runner import executors
+
+    calls = []
+    monkeypatch.setattr(executors, "warm_up", lambda scenario_json, methods: calls.append((scenario_json, methods)))
+    monkeypatch.setattr(executors.multiprocessing, "get_context",
+                        lambda *a: pytest.fail("no helper process for one group"))
+    executors.warm_up_side_by_side("{}", [["tight-dvl", "tight-sbe"]])
+    executors.warm_up_side_by_side("{}", [])
+    assert calls == [("{}", ("tight-dvl", "tight-sbe")), ("{}", ())]
 
 
 def test_kernel_cache_warm_only_with_the_main_kernels_of_these_sources(tmp_path, monkeypatch):

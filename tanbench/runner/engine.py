@@ -34,8 +34,9 @@ from tqdm import tqdm
 from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
 from tanbench.errors import describe_exception
-from tanbench.runner.executors import open_executor, warm_up
-from tanbench.runner.plan import Plan, builtin_methods, check_series_mode, compile_seconds, cpu_share_now, make_plan
+from tanbench.runner.executors import open_executor, warm_up_side_by_side
+from tanbench.runner.plan import (Plan, builtin_methods, check_series_mode, compile_groups, compile_processes,
+                                  compile_seconds, cpu_share_now, make_plan, share_of_each)
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import Task, TaskResult, execute
 from tanbench.runner.validate import check_output, validate_sweep
@@ -226,20 +227,25 @@ def shared_inputs(sweep: Sweep) -> tuple[dict, dict]:
     return maps, shared_worlds
 
 
-def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note) -> None:
-    """Compile the kernels of the sweep's methods here, into numba's on-disk cache, unless it holds them
+def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note, truth_maps: dict | None = None) -> None:
+    """Compile the kernels of the sweep's methods into numba's on-disk cache, unless it holds them
     (:func:`tanbench.kernel_cache.is_warm`, the rule of ``plan``'s estimate too), so that
-    the workers only load them (a progress bar at 0 % for a minute would look like a hang)."""
+    the workers only load them (a progress bar at 0 % for a minute would look like a hang).
+    Up to one process per worker (at most the cores) compiles a group of method families side by
+    side (:func:`tanbench.runner.plan.compile_groups`, :func:`executors.warm_up_side_by_side`)."""
     methods = plan.sweep.spec.methods
     if kernel_cache.is_warm(builtin_methods(methods)):
         return
-    # the cold methods' measured compile time over the share of a core this process gets now
-    guess = compile_seconds(methods) / cpu_share_now()
+    processes = compile_processes(plan.workers)
+    groups = compile_groups(methods, processes)
+    # the longest group's measured compile time over the share of a core each compiling process will get
+    guess = compile_seconds(methods, processes=processes) / share_of_each(len(groups), cpu_share_now())
     if progress:
-        note(f"compiling the numba kernels (once per install or kernel code change; about {guess:.0f} s on this "
-             f"machine now)...")
+        side = f" in {len(groups)} processes" if len(groups) > 1 else ""
+        note(f"compiling the numba kernels{side} (once per install or kernel code change; about {guess:.0f} s "
+             f"on this machine now)...")
     started = time.perf_counter()
-    warm_up(todo[0].scenario_json, methods)
+    warm_up_side_by_side(todo[0].scenario_json, groups, truth_maps)
     if progress:
         note(f"compiled in {time.perf_counter() - started:.0f} s; starting the workers")
 
@@ -254,11 +260,11 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
     # longest first: the last tasks to start are the short ones, so no worker idles while
     # another finishes a long task at the end (results do not depend on the order)
     remaining = sorted(todo, key=plan.task_cost, reverse=True)
-    if scheduler in (None, "local-dask"):
-        compile_kernels(plan, remaining, progress, note)
     # built or read here (validate_worlds did), shipped to the workers: they never read map
     # files nor synthesise a seafloor or a noise-free world again (shared_inputs)
     truth_maps, worlds = shared_inputs(plan.sweep)
+    if scheduler in (None, "local-dask"):
+        compile_kernels(plan, remaining, progress, note, truth_maps)
     bar = None
     try:
         for start in range(1, MAX_POOL_STARTS + 1):

@@ -88,6 +88,38 @@ def warm_up(scenario_json: str | None = None, methods=None) -> None:
     kernel_cache.mark_warm(names)
 
 
+def warm_up_side_by_side(scenario_json: str | None, groups, truth_maps: dict | None = None) -> None:
+    """Compile the kernels of ``groups`` of methods (:func:`tanbench.runner.plan.compile_groups`) side by
+    side: this process warms up the first group while one spawned helper process per other group warms
+    up its own, into the same on-disk cache (numba writes each file whole, then renames it); then this
+    process warms up every group's methods, loading what the helpers compiled and compiling anything
+    they did not store (a helper that failed, or an index entry lost to a simultaneous write).
+    A helper starts as a local worker does (:func:`_local_worker_init`: single threaded, given the
+    truth maps, ending with this process)."""
+    groups = [tuple(g) for g in groups if g]
+    everything = tuple(m for g in groups for m in g)
+    if len(groups) <= 1:
+        warm_up(scenario_json, everything)
+        return
+    maps_pickle = pickle.dumps(truth_maps or {}, protocol=pickle.HIGHEST_PROTOCOL)
+    context = multiprocessing.get_context("spawn")
+    helpers = [context.Process(target=_local_worker_init, name=f"tanbench-compile-{i}", daemon=True,
+                               args=(os.getpid(), maps_pickle, b"", scenario_json, group))
+               for i, group in enumerate(groups[1:], start=1)]
+    for helper in helpers:
+        helper.start()
+    try:
+        warm_up(scenario_json, groups[0])
+        for helper in helpers:
+            helper.join()
+    finally:
+        for helper in helpers:
+            if helper.is_alive():  # this process was interrupted: the helpers' work is no longer wanted
+                helper.terminate()
+                helper.join(STOP_JOIN_S)
+    warm_up(scenario_json, everything)
+
+
 def install_worker_maps(maps: dict) -> None:
     """Install shipped truth maps in this worker; drop worlds simulated on earlier ones."""
     from tanbench.simulation import noise_free_world

@@ -35,6 +35,7 @@ SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
 COMPILE_SHARED_S = 4.9
 COMPILE_FAMILY_S = {"tight": 36.0, "loose": 19.9, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
 COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
+COMPILE_JOIN_S = 2.0  # the parent loading the kernels its helper processes compiled (docs/speed.md "Compiling")
 WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
 FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
 LARGE_SWEEP_CELLS = 2000  # `plan`, `validate` and `run` warn past this many cells
@@ -60,14 +61,43 @@ def builtin_methods(methods) -> list[str]:
     return [m for m in methods if m in builtin]
 
 
-def compile_seconds(methods, cold=None) -> float:
-    """Single-core seconds numba takes to compile the kernels of ``methods`` (the cold built-in
-    ones, :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle."""
+def compile_groups(methods, processes: int = 1, cold=None) -> list[list[str]]:
+    """The cold built-in ``methods`` (:func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names
+    them) in at most ``processes`` groups compiled side by side, one process each: whole families
+    (their methods share kernels), the longest first (``COMPILE_FAMILY_S``), each to the group with the
+    least so far. The first group, the longest, is the parent's."""
     cold = kernel_cache.cold_methods(builtin_methods(methods)) if cold is None else builtin_methods(cold)
-    if not cold:
+    families: dict[str, list[str]] = {}
+    for m in cold:
+        families.setdefault(family_of(m), []).append(m)
+    groups = [[0.0, []] for _ in range(max(1, min(processes, len(families))))]
+    for family in sorted(families, key=lambda f: -family_compile_s(f)):
+        least = min(groups, key=lambda g: g[0])
+        least[0] += family_compile_s(family)
+        least[1] += families[family]
+    return [g[1] for g in sorted(groups, key=lambda g: -g[0]) if g[1]]
+
+
+def family_of(method: str) -> str:
+    """A built-in method's family: its name without the sensor (``tight-dvl`` -> ``tight``)."""
+    return method.rsplit("-", 1)[0]
+
+
+def family_compile_s(family: str) -> float:
+    return COMPILE_FAMILY_S.get(family, COMPILE_OTHER_FAMILY_S)
+
+
+def compile_seconds(methods, cold=None, processes: int = 1) -> float:
+    """Seconds numba takes to compile the kernels of ``methods`` (the cold built-in ones,
+    :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle, with
+    ``processes`` processes compiling groups of families side by side (:func:`compile_groups`): the
+    longest group's families plus the shared simulation kernels (every process compiles those), plus
+    the parent loading the other groups' kernels afterwards. One process: the sum of all."""
+    groups = compile_groups(methods, processes, cold)
+    if not groups:
         return 0.0
-    families = {m.rsplit("-", 1)[0] for m in cold}
-    return COMPILE_SHARED_S + sum(COMPILE_FAMILY_S.get(f, COMPILE_OTHER_FAMILY_S) for f in families)
+    longest = max(sum(family_compile_s(f) for f in {family_of(m) for m in g}) for g in groups)
+    return COMPILE_SHARED_S + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0)
 
 
 def size_warning(sweep: Sweep) -> str | None:
@@ -113,15 +143,22 @@ class Plan:
             return {"compile": 0.0, "tasks": 0.0, "fixed": 0.0}
         load = current_load() if load is None else load
         methods = self.sweep.spec.methods
-        compile_s = compile_seconds(methods, None if warm is None else [] if warm else methods)
         workers = max(1, min(self.workers, len(tasks)))
         cores = default_workers()
-        share_one = min(1.0, cores / (load + 1))  # the parent alone (compiling)
+        processes = compile_processes(self.workers)
+        compile_s = compile_seconds(methods, None if warm is None else [] if warm else methods, processes=processes)
+        share_one = min(1.0, cores / (load + 1))  # the parent alone (validation, tables)
+        share_compile = min(1.0, cores / (load + processes))  # the processes compiling side by side
         share_all = min(1.0, cores / (load + workers))  # every worker busy
-        start = compile_s / share_one + WARM_START_S / share_all
+        start = compile_s / share_compile + WARM_START_S / share_all
         return {"compile": start,
                 "tasks": longest_first_makespan([self.task_cost(t) for t in tasks], workers) / share_all,
                 "fixed": FIXED_S / share_one}
+
+
+def compile_processes(workers: int) -> int:
+    """How many processes compile a cold cache's kernels side by side: the sweep's workers, at most the cores."""
+    return max(1, min(workers, default_workers()))
 
 
 def check_series_mode(series: str) -> None:
@@ -166,6 +203,15 @@ def cpu_share_now(probe_s: float = 0.25) -> float:
     while time.perf_counter() - w0 < probe_s:
         pass
     return max(0.02, min(1.0, (time.thread_time() - c0) / (time.perf_counter() - w0)))
+
+
+def share_of_each(processes: int, share_one: float) -> float:
+    """The share of a core each of ``processes`` busy processes gets, from the share one gets now
+    (:func:`cpu_share_now`): the other load that share implies, ``c / share_one - 1`` processes on
+    ``c`` cores (none if it got a whole core), shared with ours."""
+    cores = default_workers()
+    others = 0.0 if share_one >= 1.0 else cores / share_one - 1.0
+    return max(0.02, min(1.0, cores / (others + processes)))
 
 
 def current_load() -> float:
