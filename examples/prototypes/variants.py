@@ -121,3 +121,10 @@ ACC = {"C0": {}, "S": {"range_noise": "data-sheet"}, "K": {"map_representation":
 for cand, flt in ACC.items():
     for name in ("tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "pmf-sbe"):
         VARIANTS[f"acc/{cand}/{name}"] = {"method": name, "filter": dict(flt)}
+# round 2 (docs/filters.md section 7.1): existing options only
+ACC2 = {"G": {"likelihood": "gaussian"}, "KG": {"map_representation": "bilinear", "likelihood": "gaussian"},
+        "W": {"measurement_noise_altitude_m": 1.5}, "C2": {"map_slope_factor": 0.577},
+        "Hq": {"regularisation_bandwidth": 0.25}}
+for cand, flt in ACC2.items():
+    for name in ("tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "pmf-sbe"):
+        VARIANTS[f"acc/{cand}/{name}"] = {"method": name, "filter": dict(flt)}
