@@ -43,7 +43,7 @@ from tanbench.filters.trig import attitude_sin_cos, attitude_wound
 from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
 from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell, node_grid
-from tanbench.terrain.representation import map_variance_grid
+from tanbench.terrain.representation import filter_map_variance
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 LIK_GAUSSIAN, LIK_STUDENT = LIKELIHOOD["gaussian"], LIKELIHOOD["student-t"]
@@ -70,7 +70,7 @@ def likelihood_grid(f, nmap):
     if not likelihood_of(f).mapaware:
         return node_grid(nmap)
     if f.map_aware_likelihood:
-        mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+        mvar = filter_map_variance(f, nmap)
     else:
         mvar = np.where(np.isnan(nmap.z), np.nan, 0.0)
     return node_grid(nmap, mvar)
