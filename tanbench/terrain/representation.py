@@ -50,6 +50,17 @@ def _diff(a_minus, a0, a_plus, step):
 
 
 @nb.njit(cache=True)
+def _neighbours(z, i, j):
+    """The four neighbours (west, east, south, north) of node (i, j); NaN beyond the grid."""
+    ny, nx = z.shape
+    w = z[i, j - 1] if j > 0 else np.nan
+    e = z[i, j + 1] if j < nx - 1 else np.nan
+    s = z[i - 1, j] if i > 0 else np.nan
+    n = z[i + 1, j] if i < ny - 1 else np.nan
+    return w, e, s, n
+
+
+@nb.njit(cache=True)
 def representation_variance(z, res_e, res_n, slope_factor, map_error, out):
     """Fill ``out`` (ny, nx) with each node's map variance; NaN where ``z`` is NaN."""
     ny, nx = z.shape
@@ -61,10 +72,7 @@ def representation_variance(z, res_e, res_n, slope_factor, map_error, out):
             if h != h:
                 out[i, j] = np.nan
                 continue
-            w = z[i, j - 1] if j > 0 else np.nan
-            e = z[i, j + 1] if j < nx - 1 else np.nan
-            s = z[i - 1, j] if i > 0 else np.nan
-            n = z[i + 1, j] if i < ny - 1 else np.nan
+            w, e, s, n = _neighbours(z, i, j)
             ge = _diff(w, h, e, res_e)
             gn = _diff(s, h, n, res_n)
             slope = math.sqrt(ge * ge + gn * gn)
@@ -109,8 +117,9 @@ def interpolation_variance(z, map_error, out):
             if h != h:
                 out[i, j] = np.nan
                 continue
-            dee = _second(z[i, j - 1] if j > 0 else np.nan, h, z[i, j + 1] if j < nx - 1 else np.nan)
-            dnn = _second(z[i - 1, j] if i > 0 else np.nan, h, z[i + 1, j] if i < ny - 1 else np.nan)
+            w, e, s, n = _neighbours(z, i, j)
+            dee = _second(w, h, e)
+            dnn = _second(s, h, n)
             out[i, j] = 0.25 * ((dee * dee + dnn * dnn) / 30.0 + dee * dnn / 18.0) + base
 
 
