@@ -25,7 +25,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
+
+try:  # scipy.stats.beta.ppf's own function (a scipy.special ufunc): the tables' intervals without scipy.stats
+    from scipy.special._ufuncs import _beta_ppf
+except ImportError:  # pragma: no cover - an older or newer scipy without it
+    _beta_ppf = None
 
 POWER = 0.80
 PERMUTATIONS = 4000
@@ -49,9 +54,24 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     if n <= 0:
         return (math.nan, math.nan)
     a = (1.0 - level) / 2.0
-    lo = 0.0 if k == 0 else float(stats.beta.ppf(a, k, n - k + 1))
-    hi = 1.0 if k == n else float(stats.beta.ppf(1.0 - a, k + 1, n - k))
+    lo = 0.0 if k == 0 else _beta_quantile(a, k, n - k + 1)
+    hi = 1.0 if k == n else _beta_quantile(1.0 - a, k + 1, n - k)
     return lo, hi
+
+
+def _beta_quantile(q: float, a: float, b: float) -> float:
+    """``scipy.stats.beta.ppf(q, a, b)``, bit for bit (its own ufunc), without importing scipy.stats:
+    a results table needs only this, and scipy.stats costs a sweep's parent about a second to import."""
+    if _beta_ppf is None:
+        return float(_stats().beta.ppf(q, a, b))
+    return float(_beta_ppf(q, a, b))
+
+
+def _stats():
+    """scipy.stats, imported when a test needs it (the verdicts), not with the tables."""
+    from scipy import stats
+
+    return stats
 
 
 def lost_tests(new: np.ndarray, base: np.ndarray, paired: bool) -> tuple[float, float]:
@@ -62,12 +82,12 @@ def lost_tests(new: np.ndarray, base: np.ndarray, paired: bool) -> tuple[float, 
         c = int(np.sum(base & ~new))
         if b + c == 0:
             return 1.0, 1.0
-        return float(stats.binom.sf(b - 1, b + c, 0.5)), float(stats.binom.sf(c - 1, b + c, 0.5))
+        return float(_stats().binom.sf(b - 1, b + c, 0.5)), float(_stats().binom.sf(c - 1, b + c, 0.5))
     if new.size == 0 or base.size == 0:
         return 1.0, 1.0
     table = [[int(new.sum()), int((~new).sum())], [int(base.sum()), int((~base).sum())]]
-    return (float(stats.fisher_exact(table, alternative="greater").pvalue),
-            float(stats.fisher_exact(table, alternative="less").pvalue))
+    return (float(_stats().fisher_exact(table, alternative="greater").pvalue),
+            float(_stats().fisher_exact(table, alternative="less").pvalue))
 
 
 def p90(values: np.ndarray, axis=-1):
@@ -130,7 +150,7 @@ def bootstrap_sd(y: np.ndarray, statistic: str, n: int = 1000, seed: int = 0) ->
 
 def z_sum(level: float, power: float = POWER) -> float:
     """z_{1-level} + z_{power}: the distance, in standard errors, of a detectable effect."""
-    return float(stats.norm.ppf(1.0 - level) + stats.norm.ppf(power))
+    return float(_stats().norm.ppf(1.0 - level) + _stats().norm.ppf(power))
 
 
 def mde_shift(margin: float, se: float, level: float) -> float:
@@ -169,7 +189,7 @@ def mde_lost_paired(n: int, reshuffled: int, level: float) -> float:
         return math.inf
     c = int(reshuffled)
     b = 1
-    while stats.binom.sf(b - 1, b + c, 0.5) > level:  # the fewest runs lost only in NEW that reject
+    while _stats().binom.sf(b - 1, b + c, 0.5) > level:  # the fewest runs lost only in NEW that reject
         b += 1
         if b > 10 * n + 100:
             return math.inf

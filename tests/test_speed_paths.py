@@ -58,3 +58,45 @@ def test_series_kept_up_to_a_memory_budget():
     kept.keep("a", table)
     kept.keep("b", table)
     assert list(kept.tables) == ["a"]
+
+
+def test_clopper_pearson_is_scipy_stats_beta_ppf_to_the_bit():
+    """The tables' intervals come from scipy.stats.beta.ppf's own ufunc (no scipy.stats import)."""
+    from scipy import stats
+
+    from tanbench.inference import clopper_pearson
+
+    a = (1.0 - 0.95) / 2.0  # as clopper_pearson computes it at its default level
+    for n in (1, 2, 3, 7, 30, 80, 90, 240, 1650):
+        for k in sorted({0, 1, 2, n // 3, n // 2, n - 1, n} & set(range(n + 1))):
+            lo, hi = clopper_pearson(k, n)
+            assert lo == (0.0 if k == 0 else float(stats.beta.ppf(a, k, n - k + 1)))
+            assert hi == (1.0 if k == n else float(stats.beta.ppf(1 - a, k + 1, n - k)))
+
+
+def test_tables_and_runner_import_without_scipy_stats():
+    """scipy.stats (about a second of a sweep's start-up) is imported only by the verdicts."""
+    import subprocess
+    import sys
+
+    code = ("import sys, tanbench.cli, tanbench.runner.engine, tanbench.results, tanbench.runner.tasks; "
+            "print('scipy.stats' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True).stdout.strip() == "False"
+
+
+def test_task_seeds_are_the_seed_functions():
+    """A worker's keys computed once per cell give the seeds of vehicle_seed and filter_seed."""
+    from tanbench.config import Scenario
+    from tanbench.runner.seeds import filter_seed, keyed_filter_seed, keyed_vehicle_seed, vehicle_seed
+    from tanbench.runner.tasks import cell_scenario
+    from tanbench.methods.registry import get
+
+    text = Scenario(map_resolution_m=20, sampling_time_s=5).model_dump_json()
+    scenario, pairing_key, cell_key = cell_scenario(text)
+    assert cell_scenario(text)[0] is scenario
+    for run in (0, 7):
+        assert keyed_vehicle_seed(424242, pairing_key, run).spawn_key == vehicle_seed(424242, scenario, run).spawn_key
+        for method in ("tight-dvl", "loose-dvl"):
+            got = keyed_filter_seed(424242, cell_key, get(method).seed_id, run)
+            assert got.spawn_key == filter_seed(424242, scenario, method, run).spawn_key

@@ -16,6 +16,7 @@ import threading
 import time
 import traceback
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from tanbench.errors import TanbenchError, describe_exception
 from tanbench.schema import METRIC_COLUMNS, SERIES_COLUMNS
 from tanbench.config import Scenario
 from tanbench.methods import get, run_method
-from tanbench.runner.seeds import filter_seed, seed_number, vehicle_seed
+from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed, seed_number
 from tanbench.simulation import simulate_vehicle
 
 
@@ -103,11 +104,20 @@ def run_guarded(method: str, call):
         _running.method = None
 
 
+@lru_cache(maxsize=8)
+def cell_scenario(scenario_json: str) -> tuple[Scenario, str, str]:
+    """A task's cell: its (frozen) scenario, pairing key and cell key, built and hashed once per
+    cell in a worker instead of once per task and method (the keys hash the resolved spec)."""
+    scenario = Scenario(**json.loads(scenario_json))
+    return scenario, scenario.pairing_key(), scenario.cell_key()
+
+
 def execute(task: Task) -> TaskResult:
     """Simulate the run's vehicle data once and run every method on it."""
     guard_exits()
-    scenario = Scenario(**json.loads(task.scenario_json))
-    vseed = vehicle_seed(task.root_seed, scenario, task.run)
+    scenario, pairing_key, cell_key = cell_scenario(task.scenario_json)
+    # the seeds of runner.seeds.vehicle_seed / filter_seed, from the keys computed once per cell
+    vseed = keyed_vehicle_seed(task.root_seed, pairing_key, task.run)
     base = {"cell_id": task.cell_id, "run": task.run, "seed": seed_number(vseed)}
     empty = {k: np.nan for k in METRIC_COLUMNS}
     rows, series, code = [], {}, {}
@@ -122,8 +132,9 @@ def execute(task: Task) -> TaskResult:
         row = {**base, "method": method}
         t0 = time.perf_counter()
         try:
-            fseed = filter_seed(task.root_seed, scenario, method, task.run)
-            code_id = get(method).code_id()
+            record = get(method)
+            fseed = keyed_filter_seed(task.root_seed, cell_key, record.seed_id, task.run)
+            code_id = record.code_id()
         except Exception as exc:  # noqa: BLE001 - a user method that no longer imports here
             rows.append({**row, "filter_seed": -1, **empty, "status": "error", "error": describe_exception(exc),
                          "wall_s": 0.0})
