@@ -102,6 +102,7 @@ class _ForkServer:
         os.close(self.reply_fd)
         self.replies = os.fdopen(read_fd, "r")
         self.count = 0
+        self.cpu_s = 0.0  # the CPU seconds of the commands run here so far (a forked command's time is not the test process's)
 
     def ready(self) -> bool:
         """Whether the server imported without a word on stderr and without starting a thread (but
@@ -130,7 +131,9 @@ class _ForkServer:
             os.kill(pid, signal.SIGKILL)
             self.replies.readline()
             raise subprocess.TimeoutExpired(cmd, timeout, _text(out), _text(err))
-        code = os.waitstatus_to_exitcode(json.loads(self.replies.readline())["status"])
+        done = json.loads(self.replies.readline())
+        self.cpu_s += done["cpu_s"]
+        code = os.waitstatus_to_exitcode(done["status"])
         stdout, stderr = _text(out), _text(err)
         out.unlink()
         err.unlink()
