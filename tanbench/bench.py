@@ -46,7 +46,7 @@ from tanbench.simulation import noise_free_world, simulate_vehicle
 from tanbench.sweep import parse_sweep
 from tanbench.terrain import truth_map
 from tanbench.terrain.grid import gather_cells, node_grid
-from tanbench.terrain.representation import map_variance_grid
+from tanbench.terrain.representation import filter_map_variance
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 BENCH_SEED = 2017
@@ -202,7 +202,7 @@ def _pf_step(s, sensor: str, loose: bool):
     """One update of a particle filter's kernels, jitted and by their numpy references: (jit, numpy) callables."""
     m, lik, grid = s["x0"].shape[1], s["lik"], s["grid"]
     obs, nmap, f = s["vehicle"].obs, s["ctx"].nmap, s["scenario"].filter
-    mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    mvar = filter_map_variance(f, nmap)
     za = nmap.kernel_args()
     beams = np.ascontiguousarray(obs.dvl_beams if sensor == "dvl" else obs.sbe_beams)
     ranges = s["ranges"] if sensor == "dvl" else np.ascontiguousarray(obs.sbe_ranges[s["ctx"].updates.rows[s["k"] + 1]])
@@ -473,7 +473,7 @@ def multibeam_likelihood(particles: int = 3000, beams: int = 64, reps: int = 10)
     consts = L.beam_constants(SIG_U, SIG_D, OUTSIDE)
     ll, dist = np.empty(m), np.zeros((2, m))
     nmap, f = s["ctx"].nmap, sc.filter
-    mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    mvar = filter_map_variance(f, nmap)
     za = nmap.kernel_args()
     jit = _best(lambda: L.loglik_tight_pass(x, 0, vec, grid, lik, consts, s["att"], dist, False, work, ll), reps)[0]
     ref = _best(lambda: L.loglik_tight_numpy(x, fan, ranges, za, mvar, lik, SIG_U, OUTSIDE, None, SIG_D), 2)[0]

@@ -31,8 +31,9 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
-                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, MULTIBEAM_PATTERN, POSITION_NOISE_GROWTH, PROPAGATION,
-                              RECOVERY, REGULARISATION, REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
+                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
+                              POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION,
+                              REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
@@ -447,6 +448,15 @@ class FilterSpec(_Strict):
         0.5, ge=0, description="last-healthy recovery: growth of the re-draw square's half side per second")
     recovery_max_side_m: float = new_option(
         1000.0, gt=0, description="last-healthy recovery: largest side of the re-draw square")
+    # issue 24's accuracy study (docs/filters.md section 7): the likelihood's width
+    range_noise: choices(RANGE_NOISE) = new_option(
+        "table-2", description="every method's range (altitude) noise in the likelihood: Table 2's "
+                              "measurement_noise_altitude_m, or the sonar's data sheet: noise_m / sqrt(3), the std "
+                              "of its uniform noise of half-width noise_m [table-2]")
+    map_representation: choices(MAP_REPRESENTATION) = new_option(
+        "slope", description="map-aware likelihood: the map's representation variance as a nearest-node lookup's "
+                             "(map_slope_factor |grad h| res)^2, or bilinear interpolation's own error from the "
+                             "map's second differences; plus the declared map error either way [slope]")
 
     @model_validator(mode="after")
     def _gates_need_heading_offsets(self):
@@ -459,13 +469,18 @@ class FilterSpec(_Strict):
     # ---- derived quantities -----------------------------------------------------
     @property
     def measurement_sigmas_m(self) -> tuple[float, float]:
-        """(distance, altitude) noise std of the particle filters' likelihood under ``likelihood_r``.
+        """(distance, altitude) noise std of the particle filters' likelihood under ``likelihood_r``
+        with Table 2's altitude sigma (:meth:`Scenario.measurement_sigmas_m` applies ``range_noise``).
 
         ``per-component``: Table 2's diag(0.1, 0.1, 1)^2 as given. ``scalar-norm``: Eq. 20's
         single |R| as the norm of R (its largest variance), for every term.
         ``scalar-determinant``: |R| as the determinant of R, taken as a variance in m^2.
         """
-        d, u = self.measurement_noise_distance_m, self.measurement_noise_altitude_m
+        return self.likelihood_sigmas_m(self.measurement_noise_altitude_m)
+
+    def likelihood_sigmas_m(self, altitude_sigma_m: float) -> tuple[float, float]:
+        """:attr:`measurement_sigmas_m` with the altitude sigma ``altitude_sigma_m``."""
+        d, u = self.measurement_noise_distance_m, altitude_sigma_m
         if self.likelihood_r == "per-component":
             return d, u
         variance = max(d * d, u * u) if self.likelihood_r == "scalar-norm" else (d * d) * (d * d) * (u * u)
@@ -572,9 +587,25 @@ class Scenario(_Strict):
             raise ValueError(
                 f"map_resolution_m ({self.map_resolution_m:g}) is finer than the truth grid "
                 f"({self.terrain.truth_resolution_m:g} m)")
+        if self.filter.range_noise == "data-sheet" and self.noise_m <= 0:
+            raise ValueError("filter.range_noise: data-sheet takes the likelihood's range noise from noise_m, "
+                             "which is 0 here: use filter.range_noise: table-2")
         return self
 
     # ---- derived quantities (computed here once for every method and the bound) --
+    @property
+    def range_sigma_m(self) -> float:
+        """Every method's range (altitude) noise std: Table 2's ``filter.measurement_noise_altitude_m``, or with
+        ``filter.range_noise: data-sheet`` the sonar's own, noise_m / sqrt(3) (uniform of half-width noise_m)."""
+        f = self.filter
+        return self.noise_m / math.sqrt(3.0) if f.range_noise == "data-sheet" else f.measurement_noise_altitude_m
+
+    @property
+    def measurement_sigmas_m(self) -> tuple[float, float]:
+        """(distance, altitude) sigmas of the particle filters' likelihood (``filter.likelihood_r``,
+        ``filter.range_noise``)."""
+        return self.filter.likelihood_sigmas_m(self.range_sigma_m)
+
     def position_noise_m(self, distance_sigma_m: float | None = None) -> float:
         """East/north process noise std per filter update (Table 2's q over the sampling time,
         combined with the distance noise, by default ``filter.measurement_noise_distance_m``)."""

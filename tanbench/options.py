@@ -15,6 +15,10 @@ REGULARISATION = {"none": 0, "liu-west": 1, "gordon": 2}
 # (filters/posterior.py; kernel code REG_POSTERIOR there, after REGULARISATION's)
 TIGHT_REGULARISATION = ("shared", "posterior")
 GYRO_BIAS_NOISE = ("none", "data-sheet")
+# the likelihood's range noise: Table 2's altitude sigma, or the sonar's data sheet (noise_m's uniform std)
+RANGE_NOISE = ("table-2", "data-sheet")
+# the map-aware likelihood's representation term: nearest-node slope term, or bilinear interpolation's own error
+MAP_REPRESENTATION = ("slope", "bilinear")
 # where the tight filter re-draws a diverged cloud (filters/recovery.py)
 RECOVERY = {"estimate": 0, "last-healthy": 1}
 DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}

@@ -743,6 +743,54 @@ def test_sin_cos_of_wound_angles_is_a_bounded_pseudo_random_direction():
     assert np.isnan(s[:3]).all() and np.isnan(c[:3]).all()
 
 
+def test_sin_cos_near_and_the_exact_conversion_give_the_same_bits():
+    """The loops take ``trig.sin_cos_near`` when ``wound_count`` finds no angle beyond WOUND: it is
+    ``sin_cos`` bit for bit there; ``vecmath.exact_float_53`` is ``np.float64`` of an integer below
+    2^53, bit for bit (its numpy twin); the attitude matrices and the tight propagation give the same
+    bits whichever loop a block takes."""
+    import numba as nb
+
+    from tanbench.filters import likelihood as lk
+    from tanbench.filters.propagate import _propagate_tight_any, propagate_tight
+    from tanbench.filters.trig import WOUND, sin_cos_near, wound_count
+    from tanbench.filters.vecmath import exact_float_53
+
+    @nb.njit(cache=True)
+    def near_pass(d, s, c):
+        for j in range(d.shape[0]):
+            s[j], c[j] = sin_cos_near(d[j])
+
+    @nb.njit(cache=True)
+    def exact_pass(v, out):
+        for j in range(v.shape[0]):
+            out[j] = exact_float_53(v[j])
+
+    rng = np.random.default_rng([KERNEL_SEED, 83])
+    d = np.concatenate([rng.uniform(-40.0, 40.0, 20000), rng.uniform(-WOUND, WOUND, 20000), [WOUND, -WOUND, 0.0]])
+    s, c, s2, c2 = (np.empty_like(d) for _ in range(4))
+    trig_pass(d, s, c)
+    near_pass(d, s2, c2)
+    assert np.array_equal(s, s2) and np.array_equal(c, c2)
+    assert wound_count(d, 0.0, 0.0) == 0
+    assert wound_count(np.array([0.0, np.nan, 2 * WOUND, -0.5]), 0.5, 0.0) == 2
+    v = np.concatenate([rng.integers(0, 2**53, 50000), [0, 1, 2**32 - 1, 2**32, 2**53 - 1]]).astype(np.int64)
+    out = np.empty(v.size)
+    exact_pass(v, out)
+    assert np.array_equal(out, v.astype(np.float64))
+    m = 4000
+    x = rng.normal(0.0, 0.3, (8, m))
+    att = attitude_reference(0.01, -0.02, 0.5)
+    dcm, dcm_any = np.empty((9, m)), np.empty((9, m))
+    lk.attitude_matrices(x, 0, att, dcm)
+    lk._attitude_rows(x[PITCH], x[ROLL], x[YAW], att, dcm_any)
+    assert np.array_equal(dcm, dcm_any)
+    inc, noise = rng.normal(0.0, 1.0, 12), rng.standard_normal((6, m))
+    x1, x2, dist1, dist2 = x.copy(), x.copy(), np.zeros((2, m)), np.zeros((2, m))
+    propagate_tight(x1, inc, 0.3, noise, 0.1, 0.01, 1e-3, 2, dist1, 0.2)
+    _propagate_tight_any(x2, inc, 0.3, noise, 0.1, 0.01, 1e-3, 2, dist2, 0.2, 0)
+    assert np.array_equal(x1, x2) and np.array_equal(dist1, dist2)
+
+
 def _trig_pass():
     import numba as nb
 

@@ -240,3 +240,86 @@ def test_regularisation_none_switches_the_posterior_kernel_off_too():
     off = on.model_copy(update={"regularisation": "none"})
     assert tight_resampling_of(on).kind == posterior.REG_POSTERIOR
     assert tight_resampling_of(off).kind == REG_NONE
+
+
+# ---- the likelihood's width (docs/filters.md section 7) -------------------------------------------------------
+WIDTH_NEUTRAL = {"range_noise": "table-2", "map_representation": "slope"}
+
+
+def test_interpolation_variance_matches_numpy_and_holes():
+    from tanbench.terrain.representation import interpolation_variance, interpolation_variance_numpy
+
+    z = np.random.default_rng(1).normal(size=(7, 9))
+    z[3, 4] = np.nan
+    out = np.empty_like(z)
+    interpolation_variance(z, 0.4, out)
+    np.testing.assert_allclose(out, interpolation_variance_numpy(z, 0.4), rtol=1e-13, equal_nan=True)
+    assert np.isnan(out[3, 4]) and out[3, 5] >= 0.16
+
+
+def test_interpolation_variance_is_bilinear_interpolations_mean_square_error():
+    """On a quadratic surface sampled at the nodes, the formula is the mean square error of
+    bilinear interpolation over uniformly placed points; a plane costs nothing."""
+    from tanbench.terrain.grid import Map
+    from tanbench.terrain.representation import interpolation_variance_numpy
+
+    res = 10.0
+    ee, nn = np.meshgrid(np.arange(12) * res, np.arange(10) * res)
+
+    def surface(e, n):
+        return 0.004 * e**2 - 0.003 * n**2 + 0.002 * e * n + 0.3 * e
+
+    grid = Map(surface(ee, nn), 0.0, 0.0, res, res)
+    rng = np.random.default_rng(0)
+    e, n = rng.uniform(20, 90, 400000), rng.uniform(20, 70, 400000)
+    mse = np.mean((grid.elevation(e, n) - surface(e, n)) ** 2)
+    assert interpolation_variance_numpy(grid.z, 0.0)[5, 5] == pytest.approx(mse, rel=0.01)
+    plane = Map(0.3 * ee - 0.1 * nn, 0.0, 0.0, res, res)
+    assert np.allclose(interpolation_variance_numpy(plane.z, 0.0), 0.0, atol=1e-20)
+
+
+def test_width_options_neutral_and_every_method_takes_the_data_sheet_noise():
+    from tanbench.filters.ekf import ekf_settings
+    from tanbench.filters.mpf import mpf_settings
+    from tanbench.filters.pmf import pmf_settings
+    from tanbench.filters.tercom import tercom_settings
+    from tanbench.filters.tight import tight_model_of
+    from tanbench.methods.ekf import EkfOptions
+    from tanbench.methods.mpf import MpfOptions
+    from tanbench.methods.pmf import PmfOptions
+    from tanbench.methods.tercom import TercomOptions
+
+    assert Scenario().cell_key() == Scenario(filter=WIDTH_NEUTRAL).cell_key()
+    sheet = Scenario(noise_m=2.0, filter={"range_noise": "data-sheet"})
+    sigma = 2.0 / math.sqrt(3.0)
+    assert sheet.range_sigma_m == pytest.approx(sigma) and Scenario(noise_m=2.0).range_sigma_m == 1.0
+    assert tight_model_of(sheet).sig_u == pytest.approx(sigma)
+    for settings, options in ((pmf_settings, PmfOptions()), (ekf_settings, EkfOptions()),
+                              (tercom_settings, TercomOptions())):
+        assert settings(sheet, options).sig_u == pytest.approx(sigma)
+    assert mpf_settings(sheet, MpfOptions()).model.sig_u == pytest.approx(sigma)
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="range_noise: data-sheet"):
+        Scenario(noise_m=0.0, filter={"range_noise": "data-sheet"})
+
+
+def test_bilinear_map_term_reaches_the_likelihood_grid():
+    from tanbench.filters.likelihood import likelihood_grid
+    from tanbench.terrain import navigation_map
+
+    sc = Scenario()
+    nmap = navigation_map(sc.terrain, sc.map_resolution_m)
+    slope = likelihood_grid(sc.filter, nmap)
+    bil = likelihood_grid(Scenario(filter={"map_representation": "bilinear"}).filter, nmap)
+    assert slope.grids == bil.grids == 2
+    assert not np.array_equal(slope.nodes, bil.nodes)
+
+
+def test_width_options_at_neutral_run_the_same_filter():
+    a, _ = _run("tight-dvl", Scenario(duration_s=60.0, particles=300))
+    b, _ = _run("tight-dvl", Scenario(duration_s=60.0, particles=300, filter=WIDTH_NEUTRAL))
+    np.testing.assert_array_equal(a.east, b.east)
+    c, _ = _run("tight-dvl", Scenario(duration_s=60.0, particles=300,
+                                      filter={"range_noise": "data-sheet", "map_representation": "bilinear"}))
+    assert np.all(np.isfinite(c.east)) and not np.array_equal(a.east, c.east)

@@ -30,7 +30,7 @@ def map_aware_bound(world: str, sensor: str, states: str = "full") -> np.ndarray
                                       true_tracks)
     from tanbench.terrain import navigation_map
     from tanbench.terrain.grid import Map
-    from tanbench.terrain.representation import map_variance_grid
+    from tanbench.terrain.representation import filter_map_variance
     from tanbench.terrain.stats import gradient
     from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -39,7 +39,7 @@ def map_aware_bound(world: str, sensor: str, states: str = "full") -> np.ndarray
     tr = tracks[0]
     nmap = navigation_map(sc.terrain, sc.map_resolution_m)
     f = sc.filter
-    mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+    mvar = filter_map_variance(f, nmap)
     vmap = Map(mvar, nmap.e0, nmap.n0, nmap.res_e, nmap.res_n)
     model = model_for(sc, states)
     c = dcm_body_to_nav_numpy(tr.pitch, tr.roll, tr.yaw)

@@ -113,3 +113,18 @@ for name in ("tight-dvl", "tight-sbe", "loose-dvl"):
 IMPL_EQUAL_TIME = {"impl/tight-dvl": 1200, "impl/tight-sbe": 1300, "impl/loose-dvl": 1300}
 for label, n in IMPL_EQUAL_TIME.items():
     VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
+
+# the likelihood's width (docs/filters.md section 7): S = the sonar's data-sheet noise (filter.range_noise),
+# K = bilinear interpolation's own map error (filter.map_representation), on the recommended defaults
+ACC = {"C0": {}, "S": {"range_noise": "data-sheet"}, "K": {"map_representation": "bilinear"},
+       "SK": {"range_noise": "data-sheet", "map_representation": "bilinear"}}
+for cand, flt in ACC.items():
+    for name in ("tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "pmf-sbe"):
+        VARIANTS[f"acc/{cand}/{name}"] = {"method": name, "filter": dict(flt)}
+# round 2 (docs/filters.md section 7.1): existing options only
+ACC2 = {"G": {"likelihood": "gaussian"}, "KG": {"map_representation": "bilinear", "likelihood": "gaussian"},
+        "W": {"measurement_noise_altitude_m": 1.5}, "C2": {"map_slope_factor": 0.577},
+        "Hq": {"regularisation_bandwidth": 0.25}}
+for cand, flt in ACC2.items():
+    for name in ("tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "pmf-sbe"):
+        VARIANTS[f"acc/{cand}/{name}"] = {"method": name, "filter": dict(flt)}

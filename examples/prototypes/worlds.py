@@ -49,6 +49,8 @@ WORLDS = {
     "A-exactmap-nav": (14140014, {**AREA, "area": "A", "map_resolution_m": 2.5,
                                   "terrain": {"kind": "synthetic", "seed": 1, "map_error_m": 0.0},
                                   "sensors": {"dvl_scale_error": 0.0, "gyro_bias_instability_deg_h": 0.0}}),
+    # area A's 10 m map without its 0.4 m node errors (docs/filters.md 7.2: how much of the gap is node error)
+    "A-nodeerr0": (14140014, {**AREA, "area": "A", "terrain": {"kind": "synthetic", "seed": 1, "map_error_m": 0.0}}),
     # configs/quick.yaml's default cell (the example of a verdict the figure contradicts)
     "Q": (20261123, {**AREA, "area": "A", "particles": 2000}),
     "M20": (367900, {**MONTEREY_SCENARIO, "map_resolution_m": 20}),

@@ -244,7 +244,7 @@ def ekf_settings(scenario, options) -> EkfSettings:
     return EkfSettings(f.initial_area_m, f.initial_std_heading_rad, f.initial_std_gyro_bias_rad_s,
                        scenario.position_noise_m()**2,
                        math.radians(options.heading_drift_deg_sqrt_s) ** 2 * scenario.sampling_time_s, 0.0,
-                       f.measurement_noise_altitude_m, int(options.iterations), float(options.gate))
+                       scenario.range_sigma_m, int(options.iterations), float(options.gate))
 
 
 def run_ekf(nav, inc, beams, ranges, zargs, settings: EkfSettings) -> dict:

@@ -39,11 +39,11 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import attitude_sin_cos
+from tanbench.filters.trig import attitude_sin_cos, attitude_wound
 from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
 from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell, node_grid
-from tanbench.terrain.representation import map_variance_grid
+from tanbench.terrain.representation import filter_map_variance
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 LIK_GAUSSIAN, LIK_STUDENT = LIKELIHOOD["gaussian"], LIKELIHOOD["student-t"]
@@ -70,7 +70,7 @@ def likelihood_grid(f, nmap):
     if not likelihood_of(f).mapaware:
         return node_grid(nmap)
     if f.map_aware_likelihood:
-        mvar = map_variance_grid(nmap, f.map_slope_factor, float(nmap.meta.get("map_error_m", 0.0)))
+        mvar = filter_map_variance(f, nmap)
     else:
         mvar = np.where(np.isnan(nmap.z), np.nan, 0.0)
     return node_grid(nmap, mvar)
@@ -163,9 +163,29 @@ def attitude_matrices(x, lo, att, dcm):
     entries c00..c22; the angles as offsets from the reference ``att`` (``trig.attitude_reference``)."""
     n = dcm.shape[1]
     pitch, roll, yaw = x[PITCH, lo:lo + n], x[ROLL, lo:lo + n], x[YAW, lo:lo + n]
+    if attitude_wound(pitch, roll, yaw, att) == 0:  # the same bits without the wound angles' hash
+        _attitude_rows_near(pitch, roll, yaw, att, dcm)
+    else:
+        _attitude_rows(pitch, roll, yaw, att, dcm)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _attitude_rows_near(pitch, roll, yaw, att, dcm):
+    """:func:`_attitude_rows` of offsets all within ``trig.WOUND`` (``trig.sin_cos_near``)."""
+    _attitude_loop(pitch, roll, yaw, att, dcm, True)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _attitude_rows(pitch, roll, yaw, att, dcm):
+    """:func:`attitude_matrices` of the rows ``pitch``, ``roll``, ``yaw``."""
+    _attitude_loop(pitch, roll, yaw, att, dcm, False)
+
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _attitude_loop(pitch, roll, yaw, att, dcm, near):
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
-    for j in range(n):
-        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att)
+    for j in range(dcm.shape[1]):
+        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att, near)
         c00[j] = cg * cp - st * sg * sp
         c01[j] = -ct * sp
         c02[j] = sg * cp + st * cg * sp

@@ -211,6 +211,24 @@ def _open_window(m_prior, p_prior, centre_e, centre_n, half_side):
 # --------------------------------------------------------------------------------------
 # Closed-loop loose TAN ("kalman-feedback", the recommended architecture)
 # --------------------------------------------------------------------------------------
+
+@nb.njit(cache=True)
+def record_kalman_update(out, k, nav, p_kf, ess, healthy):
+    """Write update ``k`` of a Kalman-feedback loop into its :class:`KalmanOutputs` ``out``: the corrected
+    navigation (east, north, yaw, z-gyro bias), the KF's variances, the ESS and the health flag; no
+    re-initialisation (the loop sets ``reinit`` to 1 itself when it re-initialises)."""
+    out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, _, _, healthy_out = out
+    out_en[k, 0] = nav[E, 0]
+    out_en[k, 1] = nav[N, 0]
+    out_yaw[k] = nav[YAW, 0]
+    out_bias[k] = nav[BZ, 0]
+    var[k, 0] = p_kf[EE, EE]
+    var[k, 1] = p_kf[EN, EN]
+    var_yaw[k] = p_kf[EPSI, EPSI]
+    ess_out[k] = ess
+    healthy_out[k] = 1 if healthy else 0
+    reinit_out[k] = 0
+
 @nb.njit(cache=True)
 def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
     """Position PF -> fixes -> error-state KF of the navigation system -> corrected navigation,
@@ -349,16 +367,7 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
                 for b in range(2):
                     p_prior[a, b] = cov[a, b]
         off_map = keep_on_map(nav[:2, 0], guard.bounds)
-        out_en[k, 0] = nav[E, 0]
-        out_en[k, 1] = nav[N, 0]
-        out_yaw[k] = nav[YAW, 0]
-        out_bias[k] = nav[BZ, 0]
-        var[k, 0] = p_kf[EE, EE]
-        var[k, 1] = p_kf[EN, EN]
-        var_yaw[k] = p_kf[EPSI, EPSI]
-        ess_out[k] = ess
-        healthy_out[k] = 1 if healthy else 0
-        reinit_out[k] = 0
+        record_kalman_update(out, k, nav, p_kf, ess, healthy)
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
             bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
         if bad >= div.steps or off_map:

@@ -43,7 +43,7 @@ from tanbench.filters.cloud import uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
                                         work_block)
-from tanbench.filters.loose import position_reset, reopen_kf
+from tanbench.filters.loose import position_reset, record_kalman_update, reopen_kf
 from tanbench.filters.propagate import DIST_NONE, propagate_tight
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
@@ -167,7 +167,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     ``KalmanOutputs`` (filters/loose.py), ``gates`` the :class:`Gates`."""
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
-    out_en, out_yaw, out_bias, var, var_yaw, ess_out, reinit_out, fixed_out, rejected_out, healthy_out = out
+    out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
     bias_limit, shape_min, dt = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
@@ -297,16 +297,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                         rejected_out[k] = 1
             _restart_prior(xp, wp, x, w)
         off_map = keep_on_map(nav[:2, 0], guard.bounds)
-        out_en[k, 0] = nav[E, 0]
-        out_en[k, 1] = nav[N, 0]
-        out_yaw[k] = nav[YAW, 0]
-        out_bias[k] = nav[BZ, 0]
-        var[k, 0] = p_kf[EE, EE]
-        var[k, 1] = p_kf[EN, EN]
-        var_yaw[k] = p_kf[EPSI, EPSI]
-        ess_out[k] = ess
-        healthy_out[k] = 1 if healthy else 0
-        reinit_out[k] = 0
+        record_kalman_update(out, k, nav, p_kf, ess, healthy)
         if best < np.inf:
             bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
         if bad >= div.steps or off_map:

@@ -254,7 +254,7 @@ def mpf_settings(scenario, options) -> MpfSettings:
     f, s, T = scenario.filter, scenario.sensors, scenario.sampling_time_s
     q_eps = 2.0 * (s.gyro_bias_instability_deg_h * DEG_PER_H) ** 2 * T / s.gyro_bias_corr_time_s
     model = MpfModel(scenario.position_noise_m(), scenario.attitude_noise_rad**2, q_eps,
-                     options.depth_bias_walk_m_sqrt_s**2 * T, f.measurement_noise_altitude_m, f.outside_map_sigma)
+                     options.depth_bias_walk_m_sqrt_s**2 * T, scenario.range_sigma_m, f.outside_map_sigma)
     prior = MpfPrior(f.initial_area_m / 2.0, f.initial_std_heading_rad, options.initial_std_depth_bias_m**2,
                      f.initial_std_gyro_bias_rad_s**2)
     return MpfSettings(scenario.particles, model, prior, resampling_of(f, REG_COLS), divergence_of(f))

@@ -401,7 +401,7 @@ def pmf_settings(scenario, options) -> PmfSettings:
         sig_cross = sig0
     return PmfSettings(int(options.cells), deltas, sig0, f.initial_area_m / 2.0, scenario.position_noise_m(), sig_cross,
                        math.radians(options.heading_drift_deg_sqrt_s) * math.sqrt(scenario.sampling_time_s),
-                       options.min_spacing_m, f.measurement_noise_altitude_m, f.outside_map_sigma, f.divergence_sigma,
+                       options.min_spacing_m, scenario.range_sigma_m, f.outside_map_sigma, f.divergence_sigma,
                        f.divergence_steps)
 
 

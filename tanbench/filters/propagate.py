@@ -34,7 +34,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import LEVEL, attitude_sin_cos, sin_cos_about
+from tanbench.filters.trig import LEVEL, attitude_sin_cos, sin_cos_about, wound_count
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, EU_VX, EU_VY, EU_WX, EU_WZ,
                                             JAXE, JAXN, JAZE, JAZN, SX, SZ)
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -110,6 +110,28 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
     Only the particles ``lo .. lo + n - 1`` move, ``n`` the columns of ``noise`` (and of
     ``dist_innov``): the filter loops run their particle passes over blocks of the cloud.
     """
+    n = noise.shape[1]
+    if wound_count(x[YAW, lo:lo + n], yaw_nav0, yaw_off) == 0:  # the same bits without the wound angles' hash
+        _propagate_tight_near(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo)
+    else:
+        _propagate_tight_any(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _propagate_tight_near(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo):
+    """:func:`propagate_tight` of heading offsets all within ``trig.WOUND`` (``trig.sin_cos_near``)."""
+    _propagate_tight_loop(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo, True)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _propagate_tight_any(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo):
+    _propagate_tight_loop(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo,
+                          False)
+
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _propagate_tight_loop(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo,
+                          near):
     s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
     shared = shared_motion(inc, sig_up, sig_att, dist_mode)
     d0e, d0n = shared.d0e, shared.d0n
@@ -121,7 +143,7 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
     for j in range(noise.shape[1]):
         bx = bxs[j]
         bz = bzs[j]
-        s, c = sin_cos_about(s_off, c_off, (yaw[j] - yaw_nav0) - yaw_off)
+        s, c = sin_cos_about(s_off, c_off, (yaw[j] - yaw_nav0) - yaw_off, near)
         ue = d0e + bx * jaxe - bz * jaze
         un = d0n + bx * jaxn - bz * jazn
         de = c * ue - s * un + sig_pos * n_e[j]

@@ -318,7 +318,7 @@ def tercom_settings(scenario, options) -> TercomSettings:
                           int(options.headings), float(options.window_max_m), float(options.fix_std_m),
                           f.initial_area_m**2 / 12.0, f.initial_std_heading_rad ** 2, scenario.position_noise_m()**2,
                           math.radians(options.heading_drift_deg_sqrt_s) ** 2 * scenario.sampling_time_s,
-                          f.measurement_noise_altitude_m, f.divergence_sigma)
+                          scenario.range_sigma_m, f.divergence_sigma)
 
 
 def run_tercom(nav, beams, ranges, zargs, settings: TercomSettings) -> dict:

@@ -128,7 +128,7 @@ def collapse_resampling_of(f, regularised_cols: np.ndarray) -> Resampling:
 
 def tight_model_of(scenario) -> TightModel:
     f = scenario.filter
-    sig_d, sig_u = f.measurement_sigmas_m
+    sig_d, sig_u = scenario.measurement_sigmas_m
     return TightModel(scenario.position_noise_m(sig_d), f.process_noise_up_m, scenario.attitude_noise_rad,
                       DISTANCE_INNOVATION[f.distance_innovation], sig_d, sig_u, f.outside_map_sigma,
                       tight_bias_walk_std(scenario))

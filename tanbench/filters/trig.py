@@ -21,7 +21,7 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters import FASTMATH
-from tanbench.filters.vecmath import float_bits
+from tanbench.filters.vecmath import exact_float_53, float_bits
 
 TWO_OVER_PI = 6.36619772367581382433e-01
 PIO2_HI = 1.57079632673412561417e+00  # the first 33 bits of pi/2
@@ -50,7 +50,7 @@ def wound_angle(d):
     have lost the heading (range-scaled roughening lets the heading spread grow without bound).
     """
     h = float_bits(d) * HASH_MULTIPLIER
-    return np.float64((h >> 11) & FRACTION_MASK) * TURN_PER_2_53 - math.pi
+    return exact_float_53((h >> 11) & FRACTION_MASK) * TURN_PER_2_53 - math.pi
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
@@ -59,7 +59,30 @@ def sin_cos(d):
     and cosine of a pseudo-random angle fixed by d's bits (:func:`wound_angle`); NaN for
     NaN or infinite d."""
     nonfinite = d - d  # 0, or NaN for NaN and +-inf
-    d = d if abs(d) <= WOUND else wound_angle(d)
+    return _sin_cos_reduced(d if abs(d) <= WOUND else wound_angle(d), nonfinite)
+
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def sin_cos_near(d):
+    """:func:`sin_cos` of an angle known to be within ``WOUND`` (the same bits): the loops call it
+    when :func:`wound_count` found no wound angle in their block, and spare the wound angle's
+    hash, which costs as much as the rest of the polynomial in a SIMD loop."""
+    return _sin_cos_reduced(d, d - d)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def wound_count(row, a, b):
+    """How many ``(row[j] - a) - b`` are beyond ``WOUND`` (or NaN): angles :func:`sin_cos_near` does
+    not take."""
+    count = 0
+    for j in range(row.shape[0]):
+        count += 0 if abs((row[j] - a) - b) <= WOUND else 1
+    return count
+
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _sin_cos_reduced(d, nonfinite):
+    """:func:`sin_cos` of ``d`` within ``WOUND``; ``nonfinite`` is added to both (0, or NaN)."""
     qf = (d * TWO_OVER_PI + ROUND) - ROUND  # the nearest multiple of pi/2
     r = (d - qf * PIO2_HI) - qf * PIO2_LO  # in [-pi/4, pi/4]
     q = np.int32(qf)
@@ -75,9 +98,10 @@ def sin_cos(d):
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def sin_cos_about(s_ref, c_ref, d):
-    """(sin(ref + d), cos(ref + d)) from sin/cos of the reference angle."""
-    s, c = sin_cos(d)
+def sin_cos_about(s_ref, c_ref, d, near=False):
+    """(sin(ref + d), cos(ref + d)) from sin/cos of the reference angle; ``near`` (a constant)
+    takes :func:`sin_cos_near` for an offset known to be within ``WOUND``."""
+    s, c = sin_cos_near(d) if near else sin_cos(d)
     return s_ref * c + c_ref * s, c_ref * c - s_ref * s
 
 
@@ -93,11 +117,18 @@ LEVEL = (0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0)
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def attitude_sin_cos(pitch, roll, yaw, att):
+def attitude_sin_cos(pitch, roll, yaw, att, near=False):
     """(sin, cos) of a particle's pitch, roll and yaw, each as the reference ``att``
-    (:func:`attitude_reference`) plus an offset."""
+    (:func:`attitude_reference`) plus an offset (``near`` as in :func:`sin_cos_about`)."""
     ref_pitch, s_pitch, c_pitch, ref_roll, s_roll, c_roll, ref_yaw, s_yaw, c_yaw = att
-    st, ct = sin_cos_about(s_pitch, c_pitch, pitch - ref_pitch)
-    sg, cg = sin_cos_about(s_roll, c_roll, roll - ref_roll)
-    sp, cp = sin_cos_about(s_yaw, c_yaw, yaw - ref_yaw)
+    st, ct = sin_cos_about(s_pitch, c_pitch, pitch - ref_pitch, near)
+    sg, cg = sin_cos_about(s_roll, c_roll, roll - ref_roll, near)
+    sp, cp = sin_cos_about(s_yaw, c_yaw, yaw - ref_yaw, near)
     return st, ct, sg, cg, sp, cp
+
+
+@nb.njit(cache=True)
+def attitude_wound(pitch, roll, yaw, att):
+    """How many of the attitude offsets of rows ``pitch``, ``roll``, ``yaw`` from ``att`` are
+    beyond ``WOUND`` (:func:`wound_count`): 0 lets a loop take :func:`sin_cos_near`."""
+    return wound_count(pitch, att[0], 0.0) + wound_count(roll, att[3], 0.0) + wound_count(yaw, att[6], 0.0)

@@ -48,6 +48,21 @@ def bits_float(typingctx, i):
     return types.float64(types.int64), codegen
 
 
+EXP_52 = np.int64(0x4330000000000000)  # the bits of 2^52: OR-ed with k < 2^52 they are 2^52 + k
+TWO_52 = 4503599627370496.0
+LOW_32 = np.int64(0xFFFFFFFF)
+
+
+@nb.njit(cache=True, inline="always")
+def exact_float_53(v):
+    """The float64 of an integer ``v`` in [0, 2^53) (exact), as ``np.float64(v)`` gives it, from
+    two 2^52-offset bit patterns: AVX2 has no int64 -> float64 conversion, and LLVM turns one in
+    a SIMD loop into four scalar conversions."""
+    high = bits_float((v >> 32) | EXP_52) - TWO_52
+    low = bits_float((v & LOW_32) | EXP_52) - TWO_52
+    return high * 4294967296.0 + low
+
+
 # log: x = 2^k m, m in [sqrt(2)/2, sqrt(2)); log m = f - f^2/2 + s (f^2/2 + R(s^2)), f = m - 1,
 # s = f / (2 + f); R is fdlibm's minimax polynomial (e_log.c, Lg1..Lg7)
 LN2_HI = 6.93147180369123816490e-01

@@ -43,7 +43,7 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     offsets = np.ascontiguousarray(np.einsum("kij,bj->kbi", c, obs.dvl_beams) * ranges[:, :, None])
     model = LooseModel(sc.position_step_m,
                        f.initial_std_heading_rad if f.loose_heading_noise else 0.0,
-                       f.measurement_sigmas_m[1], f.outside_map_sigma, f.loose_converged_std_m)
+                       sc.measurement_sigmas_m[1], f.outside_map_sigma, f.loose_converged_std_m)
     rng = loop_rng(ctx.rng, f.random_numbers)
     readings = readings_of(f, T)
     x = np.empty((N_LOOSE, sc.particles))  # a column per particle

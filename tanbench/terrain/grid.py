@@ -213,11 +213,13 @@ def gather_cells(cell, nodes, grids, nx, stage):
     ``cell[j]`` is -1 (read, never used)."""
     if grids == 2:
         row = 2 * nx
-        for j in range(cell.shape[0]):
+        s0, s1, s2, s3, s4, s5, s6, s7 = stage[0], stage[1], stage[2], stage[3], stage[4], stage[5], stage[6], stage[7]
+        for j in range(cell.shape[0]):  # the rows as 1-D views: no 2-D index arithmetic per value
             k = 2 * max(cell[j], 0)
-            for q in range(4):
-                stage[q, j] = nodes[k + q]
-                stage[4 + q, j] = nodes[k + row + q]
+            low = nodes[k:k + 4]
+            high = nodes[k + row:k + row + 4]
+            s0[j], s1[j], s2[j], s3[j] = low[0], low[1], low[2], low[3]
+            s4[j], s5[j], s6[j], s7[j] = high[0], high[1], high[2], high[3]
     else:
         for j in range(cell.shape[0]):
             k = max(cell[j], 0)
