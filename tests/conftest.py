@@ -47,3 +47,41 @@ def paper_run(scenario, run_seed):
     from tanbench.simulation import simulate_vehicle
 
     return simulate_vehicle(scenario, np.random.SeedSequence(run_seed))
+
+
+# the built-in methods' kernels, compiled before the test processes start: the tight family in one
+# process, every other method in another (the two cores at once; they share only the simulation's kernels)
+WARM_UP_GROUPS = (("tight-dvl", "tight-sbe", "tight-mbe"), None)
+
+
+def pytest_sessionstart(session):
+    """With pytest-xdist (``-n``), compile the built-in methods' numba kernels into the on-disk cache once,
+    in the controlling process, before the test processes start; each of them would otherwise compile
+    the same kernels at the same time on an empty cache (a fresh clone). It is the warm-up
+    ``tanbench run`` does before its workers start (:func:`tanbench.runner.executors.warm_up`), in
+    two processes, and only if the cache does not hold them yet. Tests never depend on it: a test
+    process loads what is cached and compiles whatever else it calls."""
+    import subprocess
+    import sys
+    import time
+
+    config = session.config
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    from tanbench import kernel_cache
+    from tanbench.methods.registry import builtin_names
+
+    names = builtin_names()
+    if not kernel_cache.cold_methods(names):
+        return
+    started = time.perf_counter()
+    procs = []
+    for group in WARM_UP_GROUPS:
+        methods = list(group) if group else [m for m in names if not any(m in g for g in WARM_UP_GROUPS if g)]
+        code = ("from tanbench.runner.executors import single_thread_environment, warm_up\n"
+                f"single_thread_environment(); warm_up(None, {methods!r})")
+        procs.append(subprocess.Popen([sys.executable, "-c", code]))
+    codes = [p.wait() for p in procs]
+    if any(codes):
+        raise pytest.UsageError(f"compiling the numba kernels before the tests failed (exit codes {codes})")
+    print(f"compiled the numba kernels once before the test processes started ({time.perf_counter() - started:.0f} s)")

@@ -8,6 +8,7 @@ times. Sweeps are tiny (a few particles, a short run) so a CLI run takes seconds
 from __future__ import annotations
 
 import copy
+import json
 import os
 import signal
 import subprocess
@@ -71,10 +72,111 @@ def cli_env(extra_path: Path | None = None) -> dict:
 
 
 def cli(*args, timeout: float = 300, extra_path: Path | None = None, cwd=None) -> subprocess.CompletedProcess:
-    """Run ``python -m tanbench.cli ARGS`` and capture its output."""
+    """Run ``python -m tanbench.cli ARGS`` in a process of its own and capture its output.
+
+    The process is forked from :mod:`cli_forkserver` (the libraries already imported) when the
+    command's environment is the one that server started with, else started as a plain subprocess.
+    """
     cmd = [sys.executable, "-m", "tanbench.cli", *[str(a) for a in args]]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=cli_env(extra_path),
-                          cwd=cwd or ROOT)
+    env = cli_env(extra_path)
+    server = _forkserver()
+    if server is not None and server.serves(env):
+        return server.run(cmd, timeout, env, str(cwd or ROOT))
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd or ROOT)
+
+
+class _ForkServer:
+    """One :mod:`cli_forkserver` process of this test process (see its docstring)."""
+
+    def __init__(self):
+        import tempfile
+
+        self.env = cli_env()
+        self.dir = Path(tempfile.mkdtemp(prefix="tanbench-cli-"))
+        read_fd, self.reply_fd = os.pipe()
+        self.errors = self.dir / "server.err"
+        with open(self.errors, "wb") as err:
+            self.proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("cli_forkserver.py")),
+                                          str(self.reply_fd)], stdin=subprocess.PIPE, stdout=err, stderr=err,
+                                         env=self.env, cwd=ROOT, pass_fds=(self.reply_fd,), text=True)
+        os.close(self.reply_fd)
+        self.replies = os.fdopen(read_fd, "r")
+        self.count = 0
+        self.cpu_s = 0.0  # the CPU seconds of the commands run here so far (a forked command's time is not the test process's)
+
+    def ready(self) -> bool:
+        """Whether the server imported without a word on stderr and without starting a thread (but
+        jemalloc's background thread, see :mod:`cli_forkserver`)."""
+        line = self.replies.readline()
+        if not line:
+            return False
+        threads = json.loads(line)["threads"]
+        return set(threads) <= {"jemalloc_bg_thd"} and self.errors.read_bytes() == b""
+
+    def serves(self, env: dict) -> bool:
+        """Whether a command with environment ``env`` may be forked here: the server's environment
+        (the name of the current test, which pytest keeps in the environment, aside)."""
+        return _without(env, "PYTEST_CURRENT_TEST") == _without(self.env, "PYTEST_CURRENT_TEST")
+
+    def run(self, cmd: list[str], timeout: float, env: dict, cwd: str) -> subprocess.CompletedProcess:
+        import select
+
+        self.count += 1
+        out, err = self.dir / f"{self.count}.out", self.dir / f"{self.count}.err"
+        self.proc.stdin.write(json.dumps({"args": cmd[3:], "env": env, "cwd": cwd,
+                                          "stdout": str(out), "stderr": str(err)}) + "\n")
+        self.proc.stdin.flush()
+        pid = json.loads(self.replies.readline())["pid"]
+        if not select.select([self.replies], [], [], timeout)[0]:
+            os.kill(pid, signal.SIGKILL)
+            self.replies.readline()
+            raise subprocess.TimeoutExpired(cmd, timeout, _text(out), _text(err))
+        done = json.loads(self.replies.readline())
+        self.cpu_s += done["cpu_s"]
+        code = os.waitstatus_to_exitcode(done["status"])
+        stdout, stderr = _text(out), _text(err)
+        out.unlink()
+        err.unlink()
+        return subprocess.CompletedProcess(cmd, code, stdout, stderr)
+
+    def close(self) -> None:
+        import shutil
+
+        self.proc.stdin.close()
+        self.proc.wait(timeout=30)
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def _without(env: dict, name: str) -> dict:
+    return {k: v for k, v in env.items() if k != name}
+
+
+def _text(path: Path) -> str:
+    """A captured stream as ``subprocess.run(text=True)`` gives it (locale encoding, newlines translated)."""
+    import locale
+
+    data = path.read_bytes() if path.exists() else b""
+    return data.decode(locale.getpreferredencoding(False)).replace("\r\n", "\n").replace("\r", "\n")
+
+
+_SERVER: list = []
+
+
+def _forkserver() -> _ForkServer | None:
+    """This process's fork server, started at the first command; None where it cannot serve."""
+    if not _SERVER:
+        server = None
+        if hasattr(os, "fork") and Path("/proc/self/task").is_dir() and not os.environ.get("TANBENCH_TEST_NO_FORKSERVER"):
+            server = _ForkServer()
+            if not server.ready():
+                server.close()
+                server = None
+            else:
+                import atexit
+
+                atexit.register(server.close)
+        _SERVER.append(server)
+    return _SERVER[0]
 
 
 def _default_sigint() -> None:

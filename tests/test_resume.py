@@ -29,7 +29,7 @@ from sweep_support import (
 from tanbench import results
 from tanbench.sweep import load_sweep
 
-RUNS = 12
+RUNS = 8  # 16 tasks: room to kill after 1, half-way and 2 before the end
 N_TASKS = 2 * RUNS  # two cells (map resolution 10 and 20 m)
 # long enough runs (a few tenths of a second per task) that there is time to kill part-way
 SWEEP = sweep_dict(name="resume", runs=RUNS, scenario={"particles": 3000, "duration_s": 600},
