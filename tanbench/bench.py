@@ -443,17 +443,39 @@ def _store_cost(runs: int) -> float:
     return min(best)
 
 
-def run_bench(particles: int = 3000, repeats: int = 3, methods=None) -> dict:
-    """Measure and return every figure as a dict."""
+def yardstick_ns(path, particles: int = 3000) -> float | None:
+    """The yardstick's naive filter step (``measure()`` of the file ``path``, e.g. the project's
+    ``../shared/tools/yardstick.py``) in ns per particle-step by thread CPU, in this process; None if
+    there is no such file."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    spec = importlib.util.spec_from_file_location("tanbench_yardstick", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return float(module.measure(M=particles))
+
+
+def run_bench(particles: int = 3000, repeats: int = 3, methods=None, yardstick=None) -> dict:
+    """Measure and return every figure as a dict. With ``yardstick`` (a file with a ``measure()``),
+    tight-dvl's filter and the yardstick's step are timed in turn in this process, ``repeats`` times each."""
     methods = list(methods or names())
     runs = []
     for method in methods:
         runs.append(run_figures(method, particles, repeats))
         if method in PARTICLE_FILTERS:
             runs.append(run_figures(method, particles, repeats, "numpy"))
+    rounds = []
+    if yardstick is not None and yardstick_ns(yardstick, particles) is not None:  # the first call compiles
+        for _ in range(repeats):
+            tight = run_figures("tight-dvl", particles, 1)["ns_per_unit_cpu"]
+            rounds.append({"tight_dvl_ns": tight, "yardstick_ns": yardstick_ns(yardstick, particles)})
     return {"particles": particles, "updates": 1191, "runs": runs, "steps": reference_steps(particles),
             "kernels": kernel_breakdown(particles), "fixed": fixed_costs(),
-            "multibeam": multibeam_likelihood(particles)}
+            "multibeam": multibeam_likelihood(particles), "yardstick": rounds}
 
 
 def multibeam_likelihood(particles: int = 3000, beams: int = 64, reps: int = 10) -> dict:

@@ -770,10 +770,13 @@ def anatomy(directory: Path = typer.Argument(..., help="Results directory of an 
              + EXAMPLE.format("tanbench bench --json"))
 def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
           particles: int = typer.Option(3000, "--particles", min=16, help="Particles of the bench run."),
-          repeats: int = typer.Option(3, "--repeats", min=1, help="Runs per figure (the best is kept).")):
+          repeats: int = typer.Option(3, "--repeats", min=1, help="Runs per figure (the best is kept)."),
+          yardstick: str = typer.Option("../shared/tools/yardstick.py", "--yardstick",
+                                        help="The naive numba filter step tight-dvl is timed against in the same "
+                                             "run (a file with measure()); skipped if absent, '' to skip.")):
     from tanbench.bench import run_bench
 
-    figures = run_bench(particles=particles, repeats=repeats)
+    figures = run_bench(particles=particles, repeats=repeats, yardstick=yardstick or None)
     if as_json:
         typer.echo(json.dumps(figures))
         return
@@ -808,6 +811,14 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
                f"{mb['ns_per_particle_beam_jit']:.2f} ns per particle-beam jitted, "
                f"{mb['ns_per_particle_beam_numpy']:.2f} numpy ({mb['numpy_ratio']:.1f} x); the *-mbe runs above "
                f"use a 64-beam fan (tight-mbe's cost unit: particle-beam-step)")
+    if figures["yardstick"]:
+        typer.echo(f"  tight-dvl against the yardstick ({yardstick}), in turn in this process, thread CPU "
+                   "ns per particle-step:")
+        for r in figures["yardstick"]:
+            typer.echo(f"    tight-dvl {r['tight_dvl_ns']:6.1f}, yardstick {r['yardstick_ns']:6.1f}: "
+                       f"ratio {r['tight_dvl_ns'] / r['yardstick_ns']:.2f}")
+    elif yardstick:
+        typer.echo(f"  yardstick: no file {yardstick} (--yardstick PATH to time tight-dvl against it)")
 
 
 def _usage_error_types() -> tuple[type, ...]:

@@ -100,3 +100,14 @@ def test_task_seeds_are_the_seed_functions():
         for method in ("tight-dvl", "loose-dvl"):
             got = keyed_filter_seed(424242, cell_key, get(method).seed_id, run)
             assert got.spawn_key == filter_seed(424242, scenario, method, run).spawn_key
+
+
+def test_yardstick_is_timed_from_its_file_or_skipped(tmp_path):
+    """`make bench` times tight-dvl against the yardstick file's measure() in the same process;
+    a missing file is skipped (None), never an error."""
+    from tanbench.bench import yardstick_ns
+
+    assert yardstick_ns(tmp_path / "absent.py") is None
+    stick = tmp_path / "stick.py"
+    stick.write_text("def measure(M=3000, steps=1190, seed=0):\n    return 1000.0 / M\n")
+    assert yardstick_ns(stick, particles=500) == 2.0
