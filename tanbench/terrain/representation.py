@@ -61,8 +61,17 @@ def _neighbours(z, i, j):
 
 
 @nb.njit(cache=True)
-def representation_variance(z, res_e, res_n, slope_factor, map_error, out):
-    """Fill ``out`` (ny, nx) with each node's map variance; NaN where ``z`` is NaN."""
+def _second(a_minus, a0, a_plus):
+    """Second difference a_minus - 2 a0 + a_plus; 0 where a neighbour is missing (NaN)."""
+    if a_minus == a_minus and a_plus == a_plus:
+        return a_minus - 2.0 * a0 + a_plus
+    return 0.0
+
+
+@nb.njit(cache=True)
+def _node_variances(z, res_e, res_n, slope_factor, map_error, bilinear, out):
+    """Fill ``out`` (ny, nx) with each node's map variance, the slope term or (``bilinear``) bilinear
+    interpolation's own error, plus ``map_error``^2; NaN where ``z`` is NaN."""
     ny, nx = z.shape
     res = max(res_e, res_n)
     base = map_error * map_error
@@ -73,10 +82,21 @@ def representation_variance(z, res_e, res_n, slope_factor, map_error, out):
                 out[i, j] = np.nan
                 continue
             w, e, s, n = _neighbours(z, i, j)
-            ge = _diff(w, h, e, res_e)
-            gn = _diff(s, h, n, res_n)
-            slope = math.sqrt(ge * ge + gn * gn)
-            out[i, j] = (slope_factor * slope * res) ** 2 + base
+            if bilinear:
+                dee = _second(w, h, e)
+                dnn = _second(s, h, n)
+                out[i, j] = 0.25 * ((dee * dee + dnn * dnn) / 30.0 + dee * dnn / 18.0) + base
+            else:
+                ge = _diff(w, h, e, res_e)
+                gn = _diff(s, h, n, res_n)
+                slope = math.sqrt(ge * ge + gn * gn)
+                out[i, j] = (slope_factor * slope * res) ** 2 + base
+
+
+@nb.njit(cache=True)
+def representation_variance(z, res_e, res_n, slope_factor, map_error, out):
+    """Fill ``out`` (ny, nx) with each node's map variance; NaN where ``z`` is NaN."""
+    _node_variances(z, res_e, res_n, slope_factor, map_error, False, out)
 
 
 def representation_variance_numpy(z, res_e, res_n, slope_factor, map_error):
@@ -98,29 +118,10 @@ def representation_variance_numpy(z, res_e, res_n, slope_factor, map_error):
 
 
 @nb.njit(cache=True)
-def _second(a_minus, a0, a_plus):
-    """Second difference a_minus - 2 a0 + a_plus; 0 where a neighbour is missing (NaN)."""
-    if a_minus == a_minus and a_plus == a_plus:
-        return a_minus - 2.0 * a0 + a_plus
-    return 0.0
-
-
-@nb.njit(cache=True)
 def interpolation_variance(z, map_error, out):
     """Fill ``out`` (ny, nx) with each node's bilinear-interpolation variance (module docstring)
     plus ``map_error``^2; NaN where ``z`` is NaN."""
-    ny, nx = z.shape
-    base = map_error * map_error
-    for i in range(ny):
-        for j in range(nx):
-            h = z[i, j]
-            if h != h:
-                out[i, j] = np.nan
-                continue
-            w, e, s, n = _neighbours(z, i, j)
-            dee = _second(w, h, e)
-            dnn = _second(s, h, n)
-            out[i, j] = 0.25 * ((dee * dee + dnn * dnn) / 30.0 + dee * dnn / 18.0) + base
+    _node_variances(z, 1.0, 1.0, 0.0, map_error, True, out)
 
 
 def interpolation_variance_numpy(z, map_error):
