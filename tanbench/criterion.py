@@ -257,15 +257,20 @@ def fitted_distribution(family: str, mean: float, lo: float, hi: float):
     qlo, qhi = _order_quantiles()
     target = (hi - lo) / mean
 
-    def dist(shape):
+    def params(shape) -> tuple:
+        """(scipy distribution, its keyword parameters) of this mean and shape."""
         if family == "gamma":
-            return stats.gamma(a=shape, scale=mean / shape)
-        s = shape
-        return stats.lognorm(s=s, scale=mean * np.exp(-s * s / 2))
+            return stats.gamma, {"a": shape, "scale": mean / shape}
+        return stats.lognorm, {"s": shape, "scale": mean * np.exp(-shape * shape / 2)}
+
+    def dist(shape):
+        family_dist, kw = params(shape)
+        return family_dist(**kw)
 
     def width(shape):
-        d = dist(shape)
-        return (d.ppf(qhi) - d.ppf(qlo)) / mean - target
+        # the unfrozen ppf: the same numbers, without building a frozen distribution per root-finding step
+        family_dist, kw = params(shape)
+        return (family_dist.ppf(qhi, **kw) - family_dist.ppf(qlo, **kw)) / mean - target
 
     if family == "gamma":
         a, b = 0.05, 500.0  # width falls as the shape grows
