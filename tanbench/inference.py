@@ -27,11 +27,6 @@ import math
 import numpy as np
 from scipy import special
 
-try:  # scipy.stats.beta.ppf's own function (a scipy.special ufunc): the tables' intervals without scipy.stats
-    from scipy.special._ufuncs import _beta_ppf
-except ImportError:  # pragma: no cover - an older or newer scipy without it
-    _beta_ppf = None
-
 POWER = 0.80
 PERMUTATIONS = 4000
 
@@ -60,11 +55,10 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
 
 
 def _beta_quantile(q: float, a: float, b: float) -> float:
-    """``scipy.stats.beta.ppf(q, a, b)``, bit for bit (its own ufunc), without importing scipy.stats:
-    a results table needs only this, and scipy.stats costs a sweep's parent about a second to import."""
-    if _beta_ppf is None:
-        return float(_stats().beta.ppf(q, a, b))
-    return float(_beta_ppf(q, a, b))
+    """``scipy.stats.beta.ppf(q, a, b)`` (the same bits, tests/test_speed_paths.py) by scipy.special's public
+    inverse of the regularised incomplete beta function, without importing scipy.stats: a results table
+    needs only this, and scipy.stats costs a sweep's parent about a second to import."""
+    return float(special.betaincinv(a, b, q))
 
 
 def _stats():
