@@ -20,7 +20,7 @@ background thread (pyarrow's allocator, started by importing pandas; jemalloc's 
 a fork safe for it, and the child starts its own when it needs one).
 
 Protocol: one JSON line per request on stdin; on the reply pipe (fd given as argv[1]) the child's
-pid, then its wait status and CPU seconds, one line each.
+pid, then its wait status, one line each.
 """
 
 from __future__ import annotations
@@ -53,8 +53,8 @@ def _serve(reply_fd: int) -> dict | None:
             reply.close()
             return request
         reply.write(json.dumps({"pid": pid}) + "\n")
-        _, status, usage = os.wait4(pid, 0)
-        reply.write(json.dumps({"status": status, "cpu_s": usage.ru_utime + usage.ru_stime}) + "\n")
+        _, status = os.waitpid(pid, 0)
+        reply.write(json.dumps({"status": status}) + "\n")
     return None
 
 

@@ -49,9 +49,9 @@ def paper_run(scenario, run_seed):
     return simulate_vehicle(scenario, np.random.SeedSequence(run_seed))
 
 
-# the built-in methods' kernels, compiled before the test processes start: the tight family in one
-# process, every other method in another (the two cores at once; they share only the simulation's kernels)
-WARM_UP_GROUPS = (("tight-dvl", "tight-sbe", "tight-mbe"), None)
+# the built-in methods' kernels, compiled before the test processes start in this many processes side by side,
+# whole families in the groups `tanbench run` compiles on a cold cache (tanbench.runner.plan.compile_groups)
+WARM_UP_PROCESSES = 2
 
 
 def pytest_sessionstart(session):
@@ -70,14 +70,14 @@ def pytest_sessionstart(session):
         return
     from tanbench import kernel_cache
     from tanbench.methods.registry import builtin_names
+    from tanbench.runner.plan import compile_groups
 
     names = builtin_names()
     if not kernel_cache.cold_methods(names):
         return
     started = time.perf_counter()
     procs = []
-    for group in WARM_UP_GROUPS:
-        methods = list(group) if group else [m for m in names if not any(m in g for g in WARM_UP_GROUPS if g)]
+    for methods in compile_groups(names, WARM_UP_PROCESSES, cold=names):
         code = ("from tanbench.runner.executors import single_thread_environment, warm_up\n"
                 f"single_thread_environment(); warm_up(None, {methods!r})")
         procs.append(subprocess.Popen([sys.executable, "-c", code]))

@@ -102,7 +102,6 @@ class _ForkServer:
         os.close(self.reply_fd)
         self.replies = os.fdopen(read_fd, "r")
         self.count = 0
-        self.cpu_s = 0.0  # the CPU seconds of the commands run here so far (a forked command's time is not the test process's)
 
     def ready(self) -> bool:
         """Whether the server imported without a word on stderr and without starting a thread (but
@@ -131,9 +130,7 @@ class _ForkServer:
             os.kill(pid, signal.SIGKILL)
             self.replies.readline()
             raise subprocess.TimeoutExpired(cmd, timeout, _text(out), _text(err))
-        done = json.loads(self.replies.readline())
-        self.cpu_s += done["cpu_s"]
-        code = os.waitstatus_to_exitcode(done["status"])
+        code = os.waitstatus_to_exitcode(json.loads(self.replies.readline())["status"])
         stdout, stderr = _text(out), _text(err)
         out.unlink()
         err.unlink()
