@@ -50,7 +50,8 @@ from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.tight import keep_on_map
 from tanbench.filters.trig import attitude_reference, sin_cos
-from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR, eskf_predict, eskf_update, terrain_only_fix
+from tanbench.navigation.eskf import (EB, EE, EN, EPSI, N_ERROR, copy_matrix, eskf_predict, eskf_update,
+                                      terrain_only_fix)
 from tanbench.navigation.increments import JAZE, JAZN, SZ
 
 LOOSE_TURNED_COLS = np.array([E, N, YAW], dtype=np.int64)  # the rows the regularisation jitters
@@ -275,16 +276,16 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                     first_fix = False
                     fixed_out[k] = 1
                 else:
-                    p_save[:, :] = p_kf
+                    copy_matrix(p_save, p_kf)
                     chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
                     if not chi2 < kf.gate:
                         rejections += 1
                         if rejections >= kf.misses:
                             reopen_kf(p_kf, p0_pos, p0_yaw)
-                            p_save[:, :] = p_kf
+                            copy_matrix(p_save, p_kf)
                             chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
                     if chi2 < kf.gate and abs(nav[BZ, 0] + dx[EB]) > bias_limit:
-                        p_kf[:, :] = p_save  # the fix would make the gyro bias implausible
+                        copy_matrix(p_kf, p_save)  # the fix would make the gyro bias implausible
                         chi2 = np.inf
                     if chi2 < kf.gate:
                         rejections = 0

@@ -196,7 +196,7 @@ def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_m
     e, nn, u, pitch, roll, yaw, bxs, bzs = rows
     n_e, n_n = nz[0], nz[1]
     for j in range(noise.shape[1]):
-        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att)
+        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att, False)
         de = (cg * cp - st * sg * sp) * vx - ct * sp * vy + sig_pos * n_e[j]
         dn = (cg * sp + st * sg * cp) * vx + ct * cp * vy + sig_pos * n_n[j]
         yaw_rate = (-sg * (wx - bxs[j]) + cg * (wz - bzs[j])) / ct

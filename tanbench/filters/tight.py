@@ -276,8 +276,9 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
             yaw_off = 0.0
         spread = math.sqrt(v[E] + v[N])
         off_map = keep_on_map(mean, guard.bounds)
-        est[k, :] = mean
-        var[k, :] = v
+        for c in range(N_TIGHT):  # element by element: an array assigned to a slice compiles numba's
+            est[k, c] = mean[c]  # shape-mismatch error message (string formatting, ~2.7 s cold)
+            var[k, c] = v[c]
         cov_en_out[k] = cov[0, 1]
         ess_out[k] = ess
         reinit_out[k] = 0

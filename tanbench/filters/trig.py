@@ -62,7 +62,7 @@ def sin_cos(d):
     return _sin_cos_reduced(d if abs(d) <= WOUND else wound_angle(d), nonfinite)
 
 
-@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def sin_cos_near(d):
     """:func:`sin_cos` of an angle known to be within ``WOUND`` (the same bits): the loops call it
     when :func:`wound_count` found no wound angle in their block, and spare the wound angle's

@@ -102,7 +102,7 @@ ROUND = 6755399441055744.0  # 1.5 * 2^52: adding and subtracting it rounds to th
 EXP_MIN = -708.0  # below this exp(x) is not a normal double: 0 is returned
 
 
-@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def exp_nonpositive(x):
     """exp(x) for x <= 0 (-inf gives 0, x < -708 gives 0, NaN gives NaN); branch free."""
     low = x < EXP_MIN

@@ -43,6 +43,15 @@ N_ERROR = 4
 
 
 @nb.njit(cache=True)
+def copy_matrix(dst, src):
+    """``dst[:, :] = src`` element by element (an array assigned to a slice compiles numba's
+    shape-mismatch error message, string formatting included: ~2 s on a cold cache)."""
+    for i in range(dst.shape[0]):
+        for j in range(dst.shape[1]):
+            dst[i, j] = src[i, j]
+
+
+@nb.njit(cache=True)
 def eskf_predict(p, d_e, d_n, b_e, b_n, sz, q_pos, q_yaw, q_bias):
     """Propagate the error covariance ``p`` (4, 4) in place over one interval.
 
@@ -56,7 +65,7 @@ def eskf_predict(p, d_e, d_n, b_e, b_n, sz, q_pos, q_yaw, q_bias):
     f[EN, EB] = b_n
     f[EPSI, EB] = -sz
     fp = f @ p
-    p[:, :] = fp @ f.T
+    copy_matrix(p, fp @ f.T)
     p[EE, EE] += q_pos * q_pos
     p[EN, EN] += q_pos * q_pos
     p[EPSI, EPSI] += q_yaw * q_yaw
@@ -102,7 +111,7 @@ def eskf_update(p, nu_e, nu_n, r, gate, dx):
         a[i, EE] -= k[i, 0]
         a[i, EN] -= k[i, 1]
     new = a @ p @ a.T + k @ r @ k.T
-    p[:, :] = 0.5 * (new + new.T)
+    copy_matrix(p, 0.5 * (new + new.T))
     return chi2
 
 

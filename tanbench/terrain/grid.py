@@ -19,6 +19,8 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from tanbench.filters import FASTMATH
+
 # the map as the jitted kernels take it (a named tuple: numba passes it by value)
 MapArgs = namedtuple("MapArgs", "z e0 n0 inv_re inv_rn")
 
@@ -186,7 +188,7 @@ def node_grid_of(z, e0, n0, inv_re, inv_rn, z2=None) -> NodeGrid:
                     float(e0), float(n0), float(inv_re), float(inv_rn), nx, ny)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def locate_cell(e, n, e0, n0, inv_re, inv_rn, nx, ny):
     """(node, tx, ty) of the point (e, n): ``node`` is the index (row i * nx + column j) of its
     cell's lower-left node, -1 outside the node extent (or for a NaN point); (tx, ty) its
@@ -236,7 +238,7 @@ def cell_corners(stage, grid, grids):
     return stage[grid], stage[grids + grid], stage[2 * grids + grid], stage[3 * grids + grid]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def cell_value(corners, j, tx, ty):
     """Bilinear value at (tx, ty) of point ``j``'s cell, from its corners (:func:`cell_corners`);
     the same arithmetic as :func:`bilinear`."""
