@@ -26,16 +26,22 @@ SERIES_MODES = ("none", "summary", "full")
 # (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
 SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
 # numba compiling a sweep's kernels on a cold on-disk cache: thread CPU seconds, measured one method
-# after another in this order on the 2-core dev machine (2 Dec 2026, the kernels after issue 26's
-# wiring; docs/speed.md "Compiling"):
-# the run's simulation (strapdown navigation, IMU errors), then each method family's kernels (a
-# family: the methods named FAMILY-sensor, which run the same kernels with the same types; the
-# first, tight, includes the random numbers and resampling the later ones reuse). A sweep compiles
-# only the families it names.
-COMPILE_SHARED_S = 4.9
-COMPILE_FAMILY_S = {"tight": 36.0, "loose": 19.9, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
+# after another in this order in one process on the 2-core dev machine (3 Dec 2026, the kernels after
+# issue 27's compile cuts; docs/speed.md "Compiling less"): the run's simulation (strapdown navigation,
+# IMU errors), then each method family's kernels (a family: the methods named FAMILY-sensor, which run
+# the same kernels with the same types; the first, tight, includes the random numbers, resampling,
+# propagation and likelihood passes the later ones reuse). A sweep compiles only the families it names.
+# pmf, mpf, ekf and tercom: measured 2 Dec 2026 (after issue 26's wiring), not since.
+COMPILE_SHARED_S = 5.4
+COMPILE_FAMILY_S = {"tight": 54.0, "loose": 27.4, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
+# a family compiled in a process without the family whose kernels it reuses (a side-by-side helper):
+# loose-dvl after the simulation only, on a fresh cache (same day and code)
+COMPILE_REUSES = {"loose": "tight"}
+COMPILE_ALONE_S = {"loose": 55.7}
 COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
-COMPILE_JOIN_S = 2.0  # the parent loading the kernels its helper processes compiled (docs/speed.md "Compiling")
+# a helper process starting (spawn, imports: 1.5-1.6 s CPU) and the parent loading the kernels it
+# compiled afterwards (0.1 s), measured 3 Dec 2026
+COMPILE_JOIN_S = 1.7
 WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
 FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
 LARGE_SWEEP_CELLS = 2000  # `plan`, `validate` and `run` warn past this many cells
@@ -64,18 +70,19 @@ def builtin_methods(methods) -> list[str]:
 def compile_groups(methods, processes: int = 1, cold=None) -> list[list[str]]:
     """The cold built-in ``methods`` (:func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names
     them) in at most ``processes`` groups compiled side by side, one process each: whole families
-    (their methods share kernels), the longest first (``COMPILE_FAMILY_S``), each to the group with the
-    least so far. The first group, the longest, is the parent's."""
+    (their methods share kernels), the longest first (``COMPILE_FAMILY_S``), each to the group that
+    ends up shortest with it (:func:`group_compile_s`: a family without the one whose kernels it
+    reuses costs more). The first group, the longest, is the parent's."""
     cold = kernel_cache.cold_methods(builtin_methods(methods)) if cold is None else builtin_methods(cold)
     families: dict[str, list[str]] = {}
     for m in cold:
         families.setdefault(family_of(m), []).append(m)
-    groups = [[0.0, []] for _ in range(max(1, min(processes, len(families))))]
+    groups = [(set(), []) for _ in range(max(1, min(processes, len(families))))]
     for family in sorted(families, key=lambda f: -family_compile_s(f)):
-        least = min(groups, key=lambda g: g[0])
-        least[0] += family_compile_s(family)
-        least[1] += families[family]
-    return [g[1] for g in sorted(groups, key=lambda g: -g[0]) if g[1]]
+        least = min(groups, key=lambda g: group_compile_s(g[0] | {family}))
+        least[0].add(family)
+        least[1].extend(families[family])
+    return [g[1] for g in sorted(groups, key=lambda g: -group_compile_s(g[0])) if g[1]]
 
 
 def family_of(method: str) -> str:
@@ -87,16 +94,26 @@ def family_compile_s(family: str) -> float:
     return COMPILE_FAMILY_S.get(family, COMPILE_OTHER_FAMILY_S)
 
 
+def group_compile_s(families) -> float:
+    """Seconds one process takes to compile ``families`` after the simulation: each family's
+    ``COMPILE_FAMILY_S``, or its ``COMPILE_ALONE_S`` where the family whose kernels it reuses is not
+    in the group (it then compiles them itself)."""
+    families = set(families)
+    return sum(COMPILE_ALONE_S[f] if f in COMPILE_ALONE_S and COMPILE_REUSES[f] not in families
+               else family_compile_s(f) for f in families)
+
+
 def compile_seconds(methods, cold=None, processes: int = 1) -> float:
     """Seconds numba takes to compile the kernels of ``methods`` (the cold built-in ones,
     :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle, with
     ``processes`` processes compiling groups of families side by side (:func:`compile_groups`): the
-    longest group's families plus the shared simulation kernels (every process compiles those), plus
-    the parent loading the other groups' kernels afterwards. One process: the sum of all."""
+    longest group's families (:func:`group_compile_s`) plus the shared simulation kernels (every
+    process compiles those), plus starting the helpers and loading their kernels afterwards. One
+    process: the sum of all."""
     groups = compile_groups(methods, processes, cold)
     if not groups:
         return 0.0
-    longest = max(sum(family_compile_s(f) for f in {family_of(m) for m in g}) for g in groups)
+    longest = max(group_compile_s({family_of(m) for m in g}) for g in groups)
     return COMPILE_SHARED_S + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0)
 
 
