@@ -44,7 +44,7 @@ from tanbench.navigation.increments import compute_increments
 from tanbench.sensors.multibeam import fan_angles_deg, fan_vectors, swath_ranges
 from tanbench.simulation import noise_free_world, simulate_vehicle
 from tanbench.sweep import parse_sweep
-from tanbench.terrain import truth_map
+from tanbench.terrain import clear_truth_maps, seafloor_cache, synthesise_seafloor, terrain_key, truth_map
 from tanbench.terrain.grid import gather_cells, node_grid
 from tanbench.terrain.representation import filter_map_variance
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -383,7 +383,9 @@ def fixed_costs(runs: int = 5) -> dict:
     * ``worker_start_s``: a fresh worker process importing tanbench and warming up (loading
       the cached kernels of) the three particle filters of the CI sweep;
     * ``world_s``: building one noise-free world (truth, ping indices, ray-cast sonar ranges)
-      of the default scenario, once per world and sweep;
+      of the default scenario, once per world and sweep, its seafloor read from the disk store;
+    * ``seafloor_synthesis_s`` / ``seafloor_read_s``: synthesising the default seafloor (once per
+      machine and code version, :mod:`tanbench.terrain.seafloor_cache`) / reading it back;
     * per task (a run of the default scenario, the best of ``runs``): ``simulation_s`` (the
       run's sensors and navigation solution), ``around_filter_s`` (per method, what
       ``run_method`` spends besides the filter: inputs, checks, scoring, bound; measured
@@ -399,7 +401,16 @@ def fixed_costs(runs: int = 5) -> dict:
                f"single_thread_environment(); warm_up(None, {FIXED_COST_METHODS!r})")}
     scenario = Scenario()
     world = json.dumps(scenario.world_spec(), sort_keys=True)
+    key = terrain_key(scenario.terrain)
+    c0 = time.thread_time()
+    synthesise_seafloor(scenario.terrain)
+    out["seafloor_synthesis_s"] = time.thread_time() - c0
+    truth_map(scenario.terrain)  # stored if it was not
+    c0 = time.thread_time()
+    seafloor_cache.load(key)
+    out["seafloor_read_s"] = time.thread_time() - c0
     noise_free_world.cache_clear()
+    clear_truth_maps()
     c0 = time.thread_time()
     noise_free_world(world)
     out["world_s"] = time.thread_time() - c0

@@ -803,7 +803,9 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
     typer.echo("  fixed costs of a sweep (CPU seconds; the default scenario, the CI sweep's three methods):")
     typer.echo(f"    start-up: the parent's imports {f['parent_start_s']:.2f} s; a worker's imports and warm-up "
                f"(cached kernels) {f['worker_start_s']:.2f} s")
-    typer.echo(f"    per world: its noise-free simulation and sonar ray-casting {f['world_s']:.2f} s")
+    typer.echo(f"    per world: its noise-free simulation and sonar ray-casting {f['world_s']:.2f} s; its seafloor: "
+               f"synthesised {f['seafloor_synthesis_s']:.2f} s (once per machine and code version), read back from "
+               f"the store {f['seafloor_read_s']:.3f} s")
     typer.echo(f"    per task: the run's vehicle data {f['simulation_s']:.3f} s, around each method's filter "
                f"{f['around_filter_s']:.3f} s, storing its rows and series {f['store_s']:.3f} s")
     mb = figures["multibeam"]

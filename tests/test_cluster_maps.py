@@ -160,7 +160,7 @@ def test_a_worker_joining_later_gets_the_maps_and_they_go_with_the_sweep(cluster
 
     from tanbench.config import TerrainSpec
     from tanbench.runner.executors import open_executor
-    from tanbench.terrain import _key, file_truth_maps
+    from tanbench.terrain import file_truth_maps, terrain_key
 
     def installed_terrain_keys() -> list[str]:  # defined here: the workers cannot import this module
         from tanbench.terrain import _INSTALLED
@@ -176,7 +176,7 @@ def test_a_worker_joining_later_gets_the_maps_and_they_go_with_the_sweep(cluster
             late = add_worker("late")
             client.wait_for_workers(3, timeout=START_TIMEOUT_S)
             seen = client.run(installed_terrain_keys)
-            assert len(seen) == 3 and all(keys == [_key(spec)] for keys in seen.values()), seen
+            assert len(seen) == 3 and all(keys == [terrain_key(spec)] for keys in seen.values()), seen
         assert all(keys == [] for keys in client.run(installed_terrain_keys).values())
         client.retire_workers([w for w, info in client.scheduler_info()["workers"].items()
                                if info.get("name") == "late"], close_workers=True)

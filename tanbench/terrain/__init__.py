@@ -2,7 +2,9 @@
 
 ``truth_map(spec)`` and ``navigation_map(spec, resolution_m)`` are cached per process,
 keyed by the normalised terrain spec, so a sweep synthesises or reads each seafloor
-and derives each map once per worker, not once per run.
+and derives each map once per worker, not once per run; a synthetic seafloor is also
+stored on disk (:mod:`tanbench.terrain.seafloor_cache`), so it is synthesised once per
+machine and code version.
 
 Workers never read map files: the process that runs a sweep reads each file terrain
 once (:func:`file_truth_maps`) and ships the maps to its workers, which install them
@@ -14,6 +16,7 @@ from __future__ import annotations
 import json
 from functools import lru_cache
 
+from tanbench.terrain import seafloor_cache
 from tanbench.terrain.grid import Map
 from tanbench.terrain.layouts import layout
 from tanbench.terrain.synthetic import synthesize, with_roughness
@@ -27,29 +30,25 @@ __all__ = ["Map", "truth_map", "navigation_map", "file_truth_maps", "sweep_truth
 _INSTALLED: dict[str, Map] = {}
 
 
-def _key(spec) -> str:
-    return json.dumps(spec.resolved().model_dump(mode="json"), sort_keys=True)
-
-
 def truth_map(spec) -> Map:
     """The true seafloor for a :class:`tanbench.config.TerrainSpec`."""
-    return _truth(_key(spec))
+    return _truth(terrain_key(spec))
 
 
 def navigation_map(spec, resolution_m: float) -> Map:
     """The navigation map at ``resolution_m`` derived from :func:`truth_map` (cached)."""
-    return _navigation_cached(_key(spec), float(resolution_m))
+    return _navigation_cached(terrain_key(spec), float(resolution_m))
 
 
 def file_truth_maps(specs) -> dict[str, Map]:
     """The truth maps of the file terrains among ``specs``, by terrain key, read here (once)."""
-    return {_key(spec): truth_map(spec) for spec in specs if spec.kind == "file"}
+    return {terrain_key(spec): truth_map(spec) for spec in specs if spec.kind == "file"}
 
 
 def sweep_truth_maps(specs) -> dict[str, Map]:
     """The truth maps of every terrain among ``specs`` (file or synthetic), by terrain key:
     what a sweep's workers are given so that none synthesises a seafloor again."""
-    return {_key(spec): truth_map(spec) for spec in specs}
+    return {terrain_key(spec): truth_map(spec) for spec in specs}
 
 
 def install_truth_maps(maps: dict[str, Map]) -> None:
@@ -69,6 +68,23 @@ def uninstall_truth_maps(maps: dict[str, Map]) -> None:
     _navigation_cached.cache_clear()
 
 
+def terrain_key(spec) -> str:
+    """The key a terrain spec's maps are cached by: its resolved spec as sorted JSON."""
+    return json.dumps(spec.resolved().model_dump(mode="json"), sort_keys=True)
+
+
+def synthesise_seafloor(spec) -> Map:
+    """The synthetic seafloor of ``spec`` synthesised here (no cache, no store)."""
+    resolved = spec.resolved()
+    shape = with_roughness(layout(resolved.layout), resolved.region_hurst, resolved.region_corner_m)
+    return synthesize(shape, resolved.seed, resolved.truth_resolution_m)
+
+
+def clear_truth_maps() -> None:
+    """Forget the truth maps built in this process (installed ones stay): the next one is read or built again."""
+    _truth_cached.cache_clear()
+
+
 def _truth(key: str) -> Map:
     installed = _INSTALLED.get(key)
     return installed if installed is not None else _truth_cached(key)
@@ -78,9 +94,12 @@ def _truth(key: str) -> Map:
 def _truth_cached(key: str) -> Map:
     spec = TerrainSpec(**json.loads(key))
     if spec.kind == "synthetic":
-
-        shape = with_roughness(layout(spec.layout), spec.region_hurst, spec.region_corner_m)
-        return synthesize(shape, spec.seed, spec.truth_resolution_m)
+        stored = seafloor_cache.load(key)
+        if stored is not None:
+            return stored
+        grid = synthesise_seafloor(spec)
+        seafloor_cache.store(key, grid)
+        return grid
     return load_file_terrain(spec)
 
 
