@@ -13,8 +13,10 @@ own exit code (an uncaught exception prints its traceback and exits 1, a signal 
 code), its own streams, and nothing one command changes reaches the next.
 
 :func:`sweep_support.cli` uses it only for a command whose environment is the one the server
-started with (anything else, e.g. an extra PYTHONPATH entry or another NUMBA_CACHE_DIR, runs as
-a plain subprocess), and only if the imports printed nothing (a warning would otherwise be
+started with, or differs only by directories put before its PYTHONPATH (a plug-in's; the child
+puts them on ``sys.path`` where ``python -m`` would, unless one holds a ``sitecustomize`` that a
+fresh process would import at start-up); anything else, e.g. another NUMBA_CACHE_DIR, runs as a
+plain subprocess. And only if the imports printed nothing (a warning would otherwise be
 missed by a test that looks for one in the command's stderr) and started no thread but jemalloc's
 background thread (pyarrow's allocator, started by importing pandas; jemalloc's fork handlers make
 a fork safe for it, and the child starts its own when it needs one).
@@ -73,6 +75,7 @@ def _become(request: dict) -> None:
     sys.stdin = open(0, closefd=False)  # noqa: SIM115 - the process's own stdin, as at start-up
     sys.argv = ["-m", *request["args"]]  # runpy puts the module's path in argv[0], as `python -m` does
     sys.path[0] = os.getcwd()  # `python -m` puts the working directory first on the path
+    sys.path[1:1] = request["path"]  # then PYTHONPATH: the directories before the server's own
 
 
 if __name__ == "__main__":

@@ -75,7 +75,8 @@ def cli(*args, timeout: float = 300, extra_path: Path | None = None, cwd=None) -
     """Run ``python -m tanbench.cli ARGS`` in a process of its own and capture its output.
 
     The process is forked from :mod:`cli_forkserver` (the libraries already imported) when the
-    command's environment is the one that server started with, else started as a plain subprocess.
+    command's environment is the one that server started with, or differs only by ``extra_path``
+    (a plug-in's directory) put first on PYTHONPATH; else it is started as a plain subprocess.
     """
     cmd = [sys.executable, "-m", "tanbench.cli", *[str(a) for a in args]]
     env = cli_env(extra_path)
@@ -114,15 +115,40 @@ class _ForkServer:
 
     def serves(self, env: dict) -> bool:
         """Whether a command with environment ``env`` may be forked here: the server's environment
-        (the name of the current test, which pytest keeps in the environment, aside)."""
-        return _without(env, "PYTEST_CURRENT_TEST") == _without(self.env, "PYTEST_CURRENT_TEST")
+        (the name of the current test, which pytest keeps in the environment, aside), but for
+        directories put before the server's PYTHONPATH (see :meth:`path_prefix`)."""
+        return self.path_prefix(env) is not None
+
+    def path_prefix(self, env: dict) -> list[str] | None:
+        """The directories ``env``'s PYTHONPATH puts before the server's (``cli(extra_path=)``: a
+        plug-in's directory), if that is all that differs from the server's environment; None if
+        anything else differs, or if such a directory is not absolute, is on the server's path
+        already, or holds a module Python imports at start-up (``sitecustomize``, ``usercustomize``:
+        a forked command would not import it). The forked command puts them where ``python -m``
+        does (right after the working directory), so it imports from them what a fresh process would."""
+        ignore = ("PYTEST_CURRENT_TEST", "PYTHONPATH")
+        if _without(env, *ignore) != _without(self.env, *ignore):
+            return None
+        path, base = env.get("PYTHONPATH", ""), self.env.get("PYTHONPATH", "")
+        if path == base:
+            return []
+        if not path.endswith(os.pathsep + base):
+            return None
+        prefix = path[: -len(os.pathsep + base)].split(os.pathsep)
+        for entry in prefix:
+            folder = Path(entry)
+            if not folder.is_absolute() or entry in base.split(os.pathsep) or any(
+                    (folder / f"{name}{suffix}").exists()
+                    for name in ("sitecustomize", "usercustomize") for suffix in (".py", "", ".pyc")):
+                return None
+        return prefix
 
     def run(self, cmd: list[str], timeout: float, env: dict, cwd: str) -> subprocess.CompletedProcess:
         import select
 
         self.count += 1
         out, err = self.dir / f"{self.count}.out", self.dir / f"{self.count}.err"
-        self.proc.stdin.write(json.dumps({"args": cmd[3:], "env": env, "cwd": cwd,
+        self.proc.stdin.write(json.dumps({"args": cmd[3:], "env": env, "cwd": cwd, "path": self.path_prefix(env),
                                           "stdout": str(out), "stderr": str(err)}) + "\n")
         self.proc.stdin.flush()
         pid = json.loads(self.replies.readline())["pid"]
@@ -144,8 +170,8 @@ class _ForkServer:
         shutil.rmtree(self.dir, ignore_errors=True)
 
 
-def _without(env: dict, name: str) -> dict:
-    return {k: v for k, v in env.items() if k != name}
+def _without(env: dict, *names: str) -> dict:
+    return {k: v for k, v in env.items() if k not in names}
 
 
 def _text(path: Path) -> str:

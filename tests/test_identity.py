@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+import copy
+import shutil
 from pathlib import Path
 
 import pytest
@@ -82,13 +84,26 @@ def test_ci_baseline_checks_against_itself():
     assert proc.returncode == 0, proc.stdout + proc.stderr
 
 
-@pytest.fixture
-def stored(tmp_path):
-    data = sweep_dict(runs=2, methods=["tight-dvl"], tables={})
-    path = write_sweep(tmp_path / "s.yaml", data)
-    out = tmp_path / "out"
-    proc = cli("run", path, "--out", out, "--workers", 1, "-q")
+STORED = sweep_dict(runs=2, methods=["tight-dvl"], tables={})
+
+
+@pytest.fixture(scope="module")
+def stored_once(tmp_path_factory):
+    """The 1-cell sweep STORED run once (the tests below change a copy of its results)."""
+    root = tmp_path_factory.mktemp("stored")
+    out = root / "out"
+    proc = cli("run", write_sweep(root / "s.yaml", STORED), "--out", out, "--workers", 1, "-q")
     assert proc.returncode == 0, proc.stderr
+    return out
+
+
+@pytest.fixture
+def stored(stored_once, tmp_path):
+    """A private copy of STORED's sweep file and results: (sweep dict, results directory, directory)."""
+    data = copy.deepcopy(STORED)
+    write_sweep(tmp_path / "s.yaml", data)
+    out = tmp_path / "out"
+    shutil.copytree(stored_once, out)
     return data, out, tmp_path
 
 

@@ -1,7 +1,10 @@
 """The sweep engine through the CLI: outputs, shared cells, determinism, plan/validate/tables, reuse, failures.
 
 Every sweep here is tiny (60-80 particles, 60 s runs, 3 runs per cell) and runs through
-``python -m tanbench.cli`` in a subprocess, as a user would run it.
+``python -m tanbench.cli`` in a subprocess, as a user would run it. The base sweep has 2 worker
+processes (1 worker and a Dask cluster must reproduce it); the tests about reuse, --force, --runs
+and failures run their sweeps with 1 worker process (a worker's start-up is most of a tiny
+sweep's cost, and none of them is about how tasks are spread over workers).
 """
 
 from __future__ import annotations
@@ -194,7 +197,7 @@ def test_changed_cell_gets_new_id_and_old_results_leave_the_tables(base, tmp_pat
     assert len(new_ids - old_ids) == 1
     plan = cli("plan", sweep, "--out", out)
     assert plan.stdout.count(f"0/{RUNS} done") == 1 and plan.stdout.count(f"{RUNS}/{RUNS} done") == 2
-    proc = cli("run", sweep, "--out", out, "--workers", 2, "-q")
+    proc = cli("run", sweep, "--out", out, "--workers", 1, "-q")
     assert proc.returncode == 0, proc.stderr
     assert f"{counted(RUNS)} run, {counted(N_TASKS - RUNS)} already done" in proc.stdout
     tables = load_tables(out)
@@ -207,7 +210,7 @@ def test_changing_a_hidden_setting_reruns_every_cell(base, tmp_path):
     sweep, out = copy_results(base, tmp_path)
     before = load_tables(out)["map_resolution"]
     write_sweep(sweep, sweep_dict(scenario={"filter": {"ess_threshold": 0.3}}))
-    proc = cli("run", sweep, "--out", out, "--workers", 2, "-q")
+    proc = cli("run", sweep, "--out", out, "--workers", 1, "-q")
     assert proc.returncode == 0, proc.stderr
     assert f"{counted(N_TASKS)} run, {counted(0)} already done" in proc.stdout
     after = load_tables(out)["map_resolution"]
@@ -221,7 +224,7 @@ def test_force_recomputes_identically(base, tmp_path):
     before = results.load(out)
     some_file = sorted((out / "runs").glob("*/runs.parquet"))[0]
     stamp = some_file.stat().st_mtime_ns
-    proc = cli("run", sweep, "--out", out, "--workers", 2, "-q", "--force")
+    proc = cli("run", sweep, "--out", out, "--workers", 1, "-q", "--force")
     assert proc.returncode == 0, proc.stderr
     assert f"{counted(N_TASKS)} run, {counted(0)} already done" in proc.stdout
     assert some_file.stat().st_mtime_ns != stamp
@@ -234,7 +237,7 @@ def test_runs_option_overrides_the_file(base, tmp_path):
     before = results.load(out)
     plan = cli("plan", sweep, "--out", out, "--runs", 5)
     assert f"x 5 run(s) = {N_CELLS * 3 * 5} runs in {N_CELLS * 5} task(s)" in plan.stdout
-    proc = cli("run", sweep, "--out", out, "--workers", 2, "-q", "--runs", 5)
+    proc = cli("run", sweep, "--out", out, "--workers", 1, "-q", "--runs", 5)
     assert proc.returncode == 0, proc.stderr
     assert f"{counted(N_CELLS * 2)} run, {counted(N_TASKS)} already done" in proc.stdout
     runs = results.load(out)
@@ -268,7 +271,7 @@ def test_failed_run_is_recorded_and_the_rest_finish(tmp_path):
     (hook / "sitecustomize.py").write_text(FAULT)
     sweep = write_sweep(tmp_path / "tiny.yaml", sweep_dict())
     out = tmp_path / "out"
-    proc = cli("run", sweep, "--out", out, "--workers", 2, "-q", extra_path=hook)
+    proc = cli("run", sweep, "--out", out, "--workers", 1, "-q", extra_path=hook)
     assert proc.returncode == 1, proc.stderr
     assert "Traceback" not in proc.stderr
     assert f"{RUNS} run(s) failed (recorded with their errors; rerun to retry)" in proc.stderr
@@ -284,7 +287,7 @@ def test_failed_run_is_recorded_and_the_rest_finish(tmp_path):
     assert table.loc[(80, "tight-sbe"), "n_failed"] == RUNS and table.loc[(80, "tight-sbe"), "n_runs"] == 0
     assert table.loc[(80, "tight-dvl"), "n_runs"] == RUNS
 
-    retry = cli("run", sweep, "--out", out, "--workers", 2, "-q")  # no fault now: the failed tasks rerun
+    retry = cli("run", sweep, "--out", out, "--workers", 1, "-q")  # no fault now: the failed tasks rerun
     assert retry.returncode == 0, retry.stderr
     assert f"{counted(RUNS)} run, {counted(N_TASKS - RUNS)} already done" in retry.stdout
     assert (results.load(out)["status"] == "ok").all()
