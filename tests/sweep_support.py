@@ -123,8 +123,8 @@ class _ForkServer:
         """The directories ``env``'s PYTHONPATH puts before the server's (``cli(extra_path=)``: a
         plug-in's directory), if that is all that differs from the server's environment; None if
         anything else differs, or if such a directory is not absolute, is on the server's path
-        already, or holds a module Python imports at start-up (``sitecustomize``, ``usercustomize``:
-        a forked command would not import it). The forked command puts them where ``python -m``
+        already, holds a module Python imports at start-up (``sitecustomize``, ``usercustomize``:
+        a forked command would not import it) or an installed distribution (its entry points). The forked command puts them where ``python -m``
         does (right after the working directory), so it imports from them what a fresh process would."""
         ignore = ("PYTEST_CURRENT_TEST", "PYTHONPATH")
         if _without(env, *ignore) != _without(self.env, *ignore):
@@ -141,6 +141,8 @@ class _ForkServer:
                     (folder / f"{name}{suffix}").exists()
                     for name in ("sitecustomize", "usercustomize") for suffix in (".py", "", ".pyc")):
                 return None
+            if any(folder.glob("*.dist-info")) or any(folder.glob("*.egg-info")):
+                return None  # an installed plug-in (entry points): the server has read its registries already
         return prefix
 
     def run(self, cmd: list[str], timeout: float, env: dict, cwd: str) -> subprocess.CompletedProcess:

@@ -19,7 +19,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from tanbench.filters import FASTMATH
+from tanbench.fastmath import FASTMATH
 
 # the map as the jitted kernels take it (a named tuple: numba passes it by value)
 MapArgs = namedtuple("MapArgs", "z e0 n0 inv_re inv_rn")
