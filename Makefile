@@ -26,7 +26,7 @@ run: $(VENV)/.installed-run
 
 ## test: the test suite (spread over the machine's cores by pytest-xdist), then `make ci-check`
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -n auto
+	$(BIN)/python -m pytest -n auto --durations=25
 	$(MAKE) --no-print-directory ci-check
 
 ## ci-check: only the CI regression sweep (configs/ci.yaml) and its check against the committed results/ci-baseline:
