@@ -58,11 +58,11 @@ def pytest_sessionstart(session):
     """With pytest-xdist (``-n``), compile the built-in methods' numba kernels into the on-disk cache once,
     in the controlling process, before the test processes start; each of them would otherwise compile
     the same kernels at the same time on an empty cache (a fresh clone). It is the warm-up
-    ``tanbench run`` does before its workers start (:func:`tanbench.runner.executors.warm_up`), in
-    two processes, and only if the cache does not hold them yet. Tests never depend on it: a test
-    process loads what is cached and compiles whatever else it calls."""
-    import subprocess
-    import sys
+    ``tanbench run`` does before its workers start on a cold cache
+    (:func:`tanbench.runner.executors.warm_up_side_by_side`, the groups of
+    :func:`tanbench.runner.plan.compile_groups`), in two processes, and only if the cache does not hold
+    them yet. Tests never depend on it: a test process loads what is cached and compiles whatever else
+    it calls."""
     import time
 
     config = session.config
@@ -70,20 +70,14 @@ def pytest_sessionstart(session):
         return
     from tanbench import kernel_cache
     from tanbench.methods.registry import builtin_names
+    from tanbench.runner.executors import warm_up_side_by_side
     from tanbench.runner.plan import compile_groups
 
     names = builtin_names()
     if not kernel_cache.cold_methods(names):
         return
     started = time.perf_counter()
-    procs = []
-    for methods in compile_groups(names, WARM_UP_PROCESSES, cold=names):
-        code = ("from tanbench.runner.executors import single_thread_environment, warm_up\n"
-                f"single_thread_environment(); warm_up(None, {methods!r})")
-        procs.append(subprocess.Popen([sys.executable, "-c", code]))
-    codes = [p.wait() for p in procs]
-    if any(codes):
-        raise pytest.UsageError(f"compiling the numba kernels before the tests failed (exit codes {codes})")
+    warm_up_side_by_side(None, compile_groups(names, WARM_UP_PROCESSES, cold=names))
     print(f"compiled the numba kernels once before the test processes started ({time.perf_counter() - started:.0f} s)")
 
 
