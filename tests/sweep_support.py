@@ -81,8 +81,9 @@ def cli(*args, timeout: float = 300, extra_path: Path | None = None, cwd=None) -
     cmd = [sys.executable, "-m", "tanbench.cli", *[str(a) for a in args]]
     env = cli_env(extra_path)
     server = _forkserver()
-    if server is not None and server.serves(env):
-        return server.run(cmd, timeout, env, str(cwd or ROOT))
+    prefix = None if server is None else server.path_prefix(env)
+    if prefix is not None:
+        return server.run(cmd, timeout, env, str(cwd or ROOT), prefix)
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd or ROOT)
 
 
@@ -113,19 +114,14 @@ class _ForkServer:
         threads = json.loads(line)["threads"]
         return set(threads) <= {"jemalloc_bg_thd"} and self.errors.read_bytes() == b""
 
-    def serves(self, env: dict) -> bool:
-        """Whether a command with environment ``env`` may be forked here: the server's environment
-        (the name of the current test, which pytest keeps in the environment, aside), but for
-        directories put before the server's PYTHONPATH (see :meth:`path_prefix`)."""
-        return self.path_prefix(env) is not None
-
     def path_prefix(self, env: dict) -> list[str] | None:
         """The directories ``env``'s PYTHONPATH puts before the server's (``cli(extra_path=)``: a
         plug-in's directory), if that is all that differs from the server's environment; None if
         anything else differs, or if such a directory is not absolute, is on the server's path
-        already, holds a module Python imports at start-up (``sitecustomize``, ``usercustomize``:
-        a forked command would not import it) or an installed distribution (its entry points). The forked command puts them where ``python -m``
-        does (right after the working directory), so it imports from them what a fresh process would."""
+        already, or holds what a fresh process reads at start-up and a forked one would not: a
+        ``sitecustomize``/``usercustomize`` module, or an installed distribution (its entry points,
+        read by the server already). The forked command puts them where ``python -m`` does (right
+        after the working directory), so it imports from them what a fresh process would."""
         ignore = ("PYTEST_CURRENT_TEST", "PYTHONPATH")
         if _without(env, *ignore) != _without(self.env, *ignore):
             return None
@@ -137,20 +133,20 @@ class _ForkServer:
         prefix = path[: -len(os.pathsep + base)].split(os.pathsep)
         for entry in prefix:
             folder = Path(entry)
-            if not folder.is_absolute() or entry in base.split(os.pathsep) or any(
-                    (folder / f"{name}{suffix}").exists()
-                    for name in ("sitecustomize", "usercustomize") for suffix in (".py", "", ".pyc")):
+            read_at_start_up = [folder / f"{name}{suffix}" for name in ("sitecustomize", "usercustomize")
+                                for suffix in (".py", "", ".pyc")]
+            if (not folder.is_absolute() or entry in base.split(os.pathsep) or any(p.exists() for p in read_at_start_up)
+                    or any(folder.glob("*.dist-info")) or any(folder.glob("*.egg-info"))):
                 return None
-            if any(folder.glob("*.dist-info")) or any(folder.glob("*.egg-info")):
-                return None  # an installed plug-in (entry points): the server has read its registries already
         return prefix
 
-    def run(self, cmd: list[str], timeout: float, env: dict, cwd: str) -> subprocess.CompletedProcess:
+    def run(self, cmd: list[str], timeout: float, env: dict, cwd: str, path: list[str]) -> subprocess.CompletedProcess:
+        """Fork ``cmd`` from the server with ``env`` and ``cwd``, ``path`` (:meth:`path_prefix`) first on its path."""
         import select
 
         self.count += 1
         out, err = self.dir / f"{self.count}.out", self.dir / f"{self.count}.err"
-        self.proc.stdin.write(json.dumps({"args": cmd[3:], "env": env, "cwd": cwd, "path": self.path_prefix(env),
+        self.proc.stdin.write(json.dumps({"args": cmd[3:], "env": env, "cwd": cwd, "path": path,
                                           "stdout": str(out), "stderr": str(err)}) + "\n")
         self.proc.stdin.flush()
         pid = json.loads(self.replies.readline())["pid"]
