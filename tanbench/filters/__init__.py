@@ -5,5 +5,4 @@ methods that assemble them into TAN filters are in :mod:`tanbench.methods`.
 """
 
 # the kernels' fastmath flags, defined (and explained) in tanbench/fastmath.py
-from tanbench.fastmath import FASTMATH  # noqa: E402,F401 - re-exported for the kernel modules
-
+from tanbench.fastmath import FASTMATH  # noqa: F401 - re-exported for the kernel modules
