@@ -22,6 +22,8 @@ should hold on this machine: thread CPU ns per cost unit of a whole ``run_method
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -366,11 +368,23 @@ print(time.process_time() - c0)
 """
 
 
+# a worker forked from a process that has made the CLI's imports: the child's own CPU (fork, then ``body``)
+_FORKED_WORKER = """
+import os
+{imports}
+from tanbench.runner.executors import warm_up
+pid = os.fork()
+if pid == 0:
+    {body}
+    os._exit(0)
+_, status, usage = os.wait4(pid, 0)
+assert status == 0, status
+print(usage.ru_utime + usage.ru_stime)
+"""
+
+
 def _child_cpu_s(body: str) -> float:
     """Process CPU seconds of ``body`` run in a fresh Python (imports included)."""
-    import subprocess
-    import sys
-
     proc = subprocess.run([sys.executable, "-c", _START_UP.format(body=body)], capture_output=True, text=True,
                           check=True)
     return float(proc.stdout.strip().splitlines()[-1])
@@ -380,8 +394,10 @@ def fixed_costs(runs: int = 5) -> dict:
     """What a sweep costs besides its filters, in thread/process CPU seconds (robust on a loaded machine).
 
     * ``parent_start_s``: a fresh ``tanbench run`` process importing what it needs;
-    * ``worker_start_s``: a fresh worker process importing tanbench and warming up (loading
-      the cached kernels of) the three particle filters of the CI sweep;
+    * ``worker_start_s``: a worker forked from such a process (how the CLI starts its workers on
+      Linux, :func:`tanbench.runner.executors.local_context`) warming up (loading the cached
+      kernels of) the three particle filters of the CI sweep; ``worker_spawn_s``: a spawned
+      worker (elsewhere, or from a process running threads) importing tanbench and doing the same;
     * ``world_s``: building one noise-free world (truth, ping indices, ray-cast sonar ranges)
       of the default scenario, once per world and sweep, its seafloor read from the disk store;
     * ``seafloor_synthesis_s`` / ``seafloor_read_s``: synthesising the default seafloor (once per
@@ -395,10 +411,15 @@ def fixed_costs(runs: int = 5) -> dict:
     import json
 
 
-    out = {"parent_start_s": _child_cpu_s("import tanbench.cli, tanbench.runner.engine, tanbench.results"),
-           "worker_start_s": _child_cpu_s(
+    parent_imports = "import tanbench.cli, tanbench.runner.engine, tanbench.results"
+    warm_up_call = f"warm_up(None, {FIXED_COST_METHODS!r})"
+    out = {"parent_start_s": _child_cpu_s(parent_imports),
+           "worker_start_s": float(subprocess.run(
+               [sys.executable, "-c", _FORKED_WORKER.format(imports=parent_imports, body=warm_up_call)],
+               capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]),
+           "worker_spawn_s": _child_cpu_s(
                "from tanbench.runner.executors import single_thread_environment, warm_up\n"
-               f"single_thread_environment(); warm_up(None, {FIXED_COST_METHODS!r})")}
+               f"single_thread_environment(); {warm_up_call}")}
     scenario = Scenario()
     world = json.dumps(scenario.world_spec(), sort_keys=True)
     key = terrain_key(scenario.terrain)

@@ -19,6 +19,11 @@ import typer
 
 from tanbench import __version__
 from tanbench.errors import TanbenchError
+from tanbench.runner.executors import single_thread_environment
+
+# before numpy, scipy or numba load: the CLI's numerics run one thread each, as its workers do, and it
+# can fork its workers (executors.local_context); its kernels are not parallel
+single_thread_environment()
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="tanbench: Monte Carlo benchmark for underwater terrain-aided navigation.")
@@ -801,8 +806,8 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
             typer.echo(f"    {name:<58} {ns:7.1f}")
     f = figures["fixed"]
     typer.echo("  fixed costs of a sweep (CPU seconds; the default scenario, the CI sweep's three methods):")
-    typer.echo(f"    start-up: the parent's imports {f['parent_start_s']:.2f} s; a worker's imports and warm-up "
-               f"(cached kernels) {f['worker_start_s']:.2f} s")
+    typer.echo(f"    start-up: the parent's imports {f['parent_start_s']:.2f} s; a worker's warm-up (cached kernels) "
+               f"forked from it {f['worker_start_s']:.2f} s, spawned with its imports {f['worker_spawn_s']:.2f} s")
     typer.echo(f"    per world: its noise-free simulation and sonar ray-casting {f['world_s']:.2f} s; its seafloor: "
                f"synthesised {f['seafloor_synthesis_s']:.2f} s (once per machine and code version), read back from "
                f"the store {f['seafloor_read_s']:.3f} s")

@@ -19,6 +19,8 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
+from tanbench.runner.executors import SINGLE_THREAD_ENV
+
 ROOT = Path(__file__).resolve().parents[1]
 METHODS = ["tight-dvl", "tight-sbe", "loose-dvl"]
 # columns that depend on the machine's speed, not on the inputs
@@ -67,7 +69,8 @@ def cli_env(extra_path: Path | None = None) -> dict:
     if env.get("PYTHONPATH"):
         parts.append(env["PYTHONPATH"])
     env["PYTHONPATH"] = os.pathsep.join(parts)
-    env.update(NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", COLUMNS="200", NO_COLOR="1")
+    # every numerical library single threaded from the start, as the CLI makes itself (so it forks its workers)
+    env.update(SINGLE_THREAD_ENV, COLUMNS="200", NO_COLOR="1")
     return env
 
 

@@ -28,6 +28,7 @@ from sweep_support import (
     write_sweep,
 )
 from tanbench import results
+from tanbench.runner.executors import WORKER_NAME
 from tanbench.sweep import load_sweep
 
 RUNS = 8  # 16 tasks: room to kill after 1, half-way and 2 before the end
@@ -207,7 +208,8 @@ def test_stop_now_with_half_a_result_in_the_pipe_exits(tmp_path):
 
 
 def worker_pids(pid: int) -> list[int]:
-    """The pool's worker processes of the CLI process ``pid`` (its spawned children, Linux /proc).
+    """The pool's worker processes of the CLI process ``pid`` (Linux /proc): its children named
+    ``tanbench-worker`` (local workers, forked or spawned) or spawned by multiprocessing (Dask's).
 
     Every thread's children: a Dask nanny starts its worker from the cluster's event-loop thread.
     """
@@ -220,7 +222,8 @@ def worker_pids(pid: int) -> list[int]:
     found = []
     for child in children:
         try:
-            if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
+            if (Path(f"/proc/{child}/comm").read_bytes().strip() == WORKER_NAME
+                    or b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes()):
                 found.append(int(child))
         except OSError:
             pass

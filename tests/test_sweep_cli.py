@@ -247,7 +247,8 @@ def test_runs_option_overrides_the_file(base, tmp_path):
 
 
 # A failure injected into the worker processes: ``sitecustomize`` is imported at start-up
-# by every Python process that has its directory on PYTHONPATH, the spawned workers too.
+# by every Python process that has its directory on PYTHONPATH: the CLI, so its forked workers too (or
+# spawned ones, which import it themselves).
 FAULT = '''
 import tanbench.methods as _run
 

@@ -89,10 +89,16 @@ def toy_sweep(path, map_path, runs=1) -> Path:
     return path
 
 
-def test_workers_run_a_sweep_on_a_format_they_never_imported(tmp_path, toy_format, grid):
+def test_workers_run_a_sweep_on_a_format_they_never_imported(tmp_path, toy_format, grid, monkeypatch):
     """The worker process (spawned, without the toy format) gets the map from the client: runs are ok."""
+    import multiprocessing
+
+    from tanbench.runner import executors
     from tanbench.runner.engine import run_sweep
     from tanbench.sweep import load_sweep
+
+    # spawned, whatever this process is (a forked worker would have the format this process registered)
+    monkeypatch.setattr(executors, "local_context", lambda: multiprocessing.get_context("spawn"))
 
     write_toy(tmp_path / "sea.toygrid", grid)
     toy_sweep(tmp_path / "toy.yaml", tmp_path / "sea.toygrid")

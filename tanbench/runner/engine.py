@@ -273,10 +273,12 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
             with open_executor(workers, scheduler, truth_maps, worlds, remaining[0].scenario_json,
                                tuple(plan.sweep.spec.methods)) as handle:
                 store.write_text(plan.sweep.text, plan.out / "sweep.yaml")
+                # submitted before the bar is drawn: a forked pool starts its workers at the first submit,
+                # and the bar starts a thread (executors.local_context forks only a single-threaded process)
+                pending = {handle.executor.submit(execute, task): task for task in remaining}
                 if bar is None:
                     bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
                                dynamic_ncols=True, smoothing=0.05, desc=f"{plan.sweep.name} on {handle.description}")
-                pending = {handle.executor.submit(execute, task): task for task in remaining}
                 lost, reason = [], ""
                 try:
                     while pending:
