@@ -10,7 +10,11 @@ becomes the command: the request's argv, environment and working directory, stdo
 to files, stdin from /dev/null, then ``tanbench.cli`` run as ``__main__`` at the top level of
 this script exactly as ``python -m`` runs it. So each command is still its own process with its
 own exit code (an uncaught exception prints its traceback and exits 1, a signal is a negative
-code), its own streams, and nothing one command changes reaches the next.
+code), its own streams, and nothing one command changes reaches the next. It ends as the
+interpreter's exit does (threads joined, ``atexit`` handlers run, streams flushed) but without
+the last step, tearing down every module (:func:`_run_cli_and_exit`); the tests that start the
+CLI as a plain subprocess (:func:`sweep_support.start_cli`, the signal and kill tests) see
+that step too.
 
 :func:`sweep_support.cli` uses it only for a command whose environment is the one the server
 started with, or differs only by directories put before its PYTHONPATH (a plug-in's; the child
@@ -78,6 +82,44 @@ def _become(request: dict) -> None:
     sys.path[1:1] = request["path"]  # then PYTHONPATH: the directories before the server's own
 
 
+def _exit_status(code) -> int:
+    """The exit status Python gives ``sys.exit(code)``: None 0, an int itself, anything else printed, 1."""
+    if code is None:
+        return 0
+    if isinstance(code, int):
+        return code & 0xFF
+    print(code, file=sys.stderr)
+    return 1
+
+
+def _run_cli_and_exit() -> None:
+    """Run ``tanbench.cli`` as ``__main__`` and end the process as the interpreter's exit does, but
+    for its last step: a traceback for an uncaught exception (status 1), the other threads joined,
+    the ``atexit`` handlers run, the streams flushed; then ``os._exit`` instead of tearing down
+    every module and object of the libraries imported (about 0.55 s of CPU per command, measured
+    on a ``--version``: 0.59-0.62 s against 0.04 s with this exit)."""
+    import atexit
+    import runpy
+    import threading
+
+    try:
+        runpy.run_module("tanbench.cli", run_name="__main__", alter_sys=True)
+        status = 0
+    except SystemExit as done:
+        status = _exit_status(done.code)
+    except BaseException:  # noqa: BLE001 - what the interpreter does with an uncaught exception
+        sys.excepthook(*sys.exc_info())
+        status = 1
+    threading._shutdown()  # the interpreter's first exit step: wait for the non-daemon threads
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(status)
+
+
 if __name__ == "__main__":
     reply_fd = int(sys.argv[1])
     del sys.path[0]  # this script's directory (tests/) is not on a CLI process's path
@@ -101,6 +143,4 @@ if __name__ == "__main__":
         sys.exit(0)
     _become(request)
     del request
-    import runpy
-
-    runpy.run_module("tanbench.cli", run_name="__main__", alter_sys=True)
+    _run_cli_and_exit()
