@@ -68,20 +68,51 @@ def numerics_single_threaded() -> bool:
     return _numerics_single_threaded
 
 
+# what the fork server imports once, before it forks workers: the task's code (methods, filters, scoring)
+FORKSERVER_PRELOAD = ["tanbench.runner.tasks"]
+
+
 def local_context():
     """How this process starts local worker processes (and the compile helpers).
 
-    Forked, on Linux, when that is safe and gives the same results: this process runs no other
-    Python thread (a lock held by one would stay locked in the child) and its numerical libraries
-    run one thread each (a forked worker keeps its parent's BLAS threads, and another thread count
-    can change a matrix product's last bits). A forked worker does not import again what this
-    process has imported (about 1.8 s of CPU per worker that a spawned one spends). Else spawned:
-    a fresh interpreter, single threaded before it imports anything.
+    On Linux, forked from this process when that is safe and gives the same results: it runs no
+    other Python thread (a lock held by one would stay locked in the child) and its numerical
+    libraries run one thread each (a forked worker keeps its parent's BLAS threads, and another
+    thread count can change a matrix product's last bits). A forked worker does not import again
+    what this process has imported (about 1.8 s of CPU per worker that a spawned one spends).
+    Otherwise on Linux (a notebook, a test runner: threads), forked from multiprocessing's fork
+    server (:func:`_fork_server_context`), which imports the task's code once, single threaded,
+    for every pool this process starts. Elsewhere spawned: a fresh interpreter, single threaded
+    before it imports anything.
     """
-    if (sys.platform.startswith("linux") and threading.active_count() == 1
-            and numerics_single_threaded()):
+    if not sys.platform.startswith("linux"):
+        return multiprocessing.get_context("spawn")
+    if threading.active_count() == 1 and numerics_single_threaded():
         return multiprocessing.get_context("fork")
-    return multiprocessing.get_context("spawn")
+    return _fork_server_context()
+
+
+def _fork_server_context():
+    """multiprocessing's ``forkserver`` context, its server (one per process, started once, or again if
+    it died) started with the thread variables at 1 (:data:`SINGLE_THREAD_ENV`, for the server only)
+    and :data:`FORKSERVER_PRELOAD` imported, unless this process had started it before for
+    something else: its workers then import what it did not (thread variables set first)."""
+    from multiprocessing import forkserver
+
+    context = multiprocessing.get_context("forkserver")
+    if getattr(forkserver._forkserver, "_forkserver_pid", None) is None:  # no public handle on the server
+        context.set_forkserver_preload(FORKSERVER_PRELOAD)
+    saved = {var: os.environ.get(var) for var in THREAD_VARS}
+    os.environ.update(SINGLE_THREAD_ENV)
+    try:
+        forkserver.ensure_running()  # here, so that a server started (or restarted) now has the variables
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
+    return context
 
 
 def warm_up(scenario_json: str | None = None, methods=None) -> None:
@@ -176,8 +207,13 @@ def name_this_process(name: bytes) -> None:
 
 
 def die_with_parent(parent_pid: int) -> None:
-    """End this process when ``parent_pid`` (the process that started it) dies."""
-    if sys.platform.startswith("linux"):
+    """End this process when ``parent_pid`` (the process that started it) dies, however it dies.
+
+    A child of ``parent_pid`` (forked or spawned) on Linux: the kernel kills it when its parent
+    dies (``PR_SET_PDEATHSIG``). Otherwise (forked by a fork server, whose life a worker's open
+    pipe prolongs; or not Linux) a thread of its own waits on multiprocessing's parent sentinel,
+    which a dying ``parent_pid`` closes, and ends the process."""
+    if sys.platform.startswith("linux") and os.getppid() == parent_pid:
         try:
             if ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0:
                 if os.getppid() != parent_pid:  # it died before the line above
@@ -185,10 +221,17 @@ def die_with_parent(parent_pid: int) -> None:
                 return
         except (OSError, AttributeError):
             pass
+    parent = multiprocessing.parent_process()
+    sentinel = getattr(parent, "sentinel", None)
 
     def watch():
-        while os.getppid() == parent_pid:
-            time.sleep(PARENT_POLL_S)
+        if sentinel is not None:
+            from multiprocessing.connection import wait
+
+            wait([sentinel])
+        else:
+            while os.getppid() == parent_pid:
+                time.sleep(PARENT_POLL_S)
         os._exit(1)
 
     threading.Thread(target=watch, name="tanbench-parent-watch", daemon=True).start()
