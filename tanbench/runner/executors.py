@@ -15,8 +15,8 @@ worker plugin that also reaches workers joining later) and are installed there w
 :func:`tanbench.terrain.install_truth_maps`.
 
 Local workers die with the process that started them, however it dies (``kill -9``, a
-closed terminal): on Linux the kernel kills them (``PR_SET_PDEATHSIG``), elsewhere a
-thread of theirs watches the parent. They ignore Ctrl-C and SIGHUP, which the parent
+closed terminal): on Linux the kernel kills them (``PR_SET_PDEATHSIG``); workers of a
+fork server, and elsewhere, a thread of theirs watches the parent (:func:`die_with_parent`). They ignore Ctrl-C and SIGHUP, which the parent
 handles (it stops them).
 """
 
