@@ -222,12 +222,17 @@ def cpu_share_now(probe_s: float = 0.25) -> float:
     return max(0.02, min(1.0, (time.thread_time() - c0) / (time.perf_counter() - w0)))
 
 
+# a probe that got at least this share got a whole core: on the idle 2-core machine the probe reads
+# 0.9995-1.0 (3 December 2026), which the formula below would read as one other busy process
+WHOLE_CORE_SHARE = 0.98
+
+
 def share_of_each(processes: int, share_one: float) -> float:
     """The share of a core each of ``processes`` busy processes gets, from the share one gets now
     (:func:`cpu_share_now`): the other load that share implies, ``c / share_one - 1`` processes on
-    ``c`` cores (none if it got a whole core), shared with ours."""
+    ``c`` cores (none if it got a whole core, :data:`WHOLE_CORE_SHARE`), shared with ours."""
     cores = default_workers()
-    others = 0.0 if share_one >= 1.0 else cores / share_one - 1.0
+    others = 0.0 if share_one >= WHOLE_CORE_SHARE else cores / share_one - 1.0
     return max(0.02, min(1.0, cores / (others + processes)))
 
 
