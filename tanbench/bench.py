@@ -383,9 +383,10 @@ print(usage.ru_utime + usage.ru_stime)
 """
 
 
-def _child_cpu_s(body: str) -> float:
-    """Process CPU seconds of ``body`` run in a fresh Python (imports included)."""
-    proc = subprocess.run([sys.executable, "-c", _START_UP.format(body=body)], capture_output=True, text=True,
+def _child_cpu_s(body: str, script: str = _START_UP, **fields) -> float:
+    """Process CPU seconds of ``body`` run in a fresh Python (imports included), or as ``script``
+    (e.g. :data:`_FORKED_WORKER`, with its other ``fields``) measures it: the last line it prints."""
+    proc = subprocess.run([sys.executable, "-c", script.format(body=body, **fields)], capture_output=True, text=True,
                           check=True)
     return float(proc.stdout.strip().splitlines()[-1])
 
@@ -414,9 +415,7 @@ def fixed_costs(runs: int = 5) -> dict:
     parent_imports = "import tanbench.cli, tanbench.runner.engine, tanbench.results"
     warm_up_call = f"warm_up(None, {FIXED_COST_METHODS!r})"
     out = {"parent_start_s": _child_cpu_s(parent_imports),
-           "worker_start_s": float(subprocess.run(
-               [sys.executable, "-c", _FORKED_WORKER.format(imports=parent_imports, body=warm_up_call)],
-               capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]),
+           "worker_start_s": _child_cpu_s(warm_up_call, _FORKED_WORKER, imports=parent_imports),
            "worker_spawn_s": _child_cpu_s(
                "from tanbench.runner.executors import single_thread_environment, warm_up\n"
                f"single_thread_environment(); {warm_up_call}")}

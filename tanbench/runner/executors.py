@@ -30,7 +30,6 @@ import pickle
 import signal
 import sys
 import threading
-import time
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
@@ -193,17 +192,22 @@ def install_worker_maps(maps: dict) -> None:
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 PR_SET_NAME = 15
 WORKER_NAME = b"tanbench-worker"  # what `ps -o comm`, top and /proc/PID/comm show for a local worker (Linux)
-PARENT_POLL_S = 1.0
+
+
+def _prctl(option: int, value) -> bool:
+    """Linux's ``prctl(option, value)``; whether it succeeded (False elsewhere, or without libc)."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        return ctypes.CDLL(None, use_errno=True).prctl(option, value, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
 
 
 def name_this_process(name: bytes) -> None:
     """Give this process's name (Linux: at most 15 bytes) for ``ps`` and ``top``; a forked worker
     would otherwise show its parent's name. Elsewhere nothing."""
-    if sys.platform.startswith("linux"):
-        try:
-            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_NAME, ctypes.c_char_p(name[:15]), 0, 0, 0)
-        except (OSError, AttributeError):
-            pass
+    _prctl(PR_SET_NAME, ctypes.c_char_p(name[:15]))
 
 
 def die_with_parent(parent_pid: int) -> None:
@@ -212,26 +216,18 @@ def die_with_parent(parent_pid: int) -> None:
     A child of ``parent_pid`` (forked or spawned) on Linux: the kernel kills it when its parent
     dies (``PR_SET_PDEATHSIG``). Otherwise (forked by a fork server, whose life a worker's open
     pipe prolongs; or not Linux) a thread of its own waits on multiprocessing's parent sentinel,
-    which a dying ``parent_pid`` closes, and ends the process."""
-    if sys.platform.startswith("linux") and os.getppid() == parent_pid:
-        try:
-            if ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0:
-                if os.getppid() != parent_pid:  # it died before the line above
-                    os._exit(1)
-                return
-        except (OSError, AttributeError):
-            pass
-    parent = multiprocessing.parent_process()
-    sentinel = getattr(parent, "sentinel", None)
+    which a dying ``parent_pid`` closes, and ends the process. (Called in a process multiprocessing
+    started, which has that sentinel.)"""
+    if os.getppid() == parent_pid and _prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL)):
+        if os.getppid() != parent_pid:  # it died before the line above
+            os._exit(1)
+        return
+    sentinel = multiprocessing.parent_process().sentinel
 
     def watch():
-        if sentinel is not None:
-            from multiprocessing.connection import wait
+        from multiprocessing.connection import wait
 
-            wait([sentinel])
-        else:
-            while os.getppid() == parent_pid:
-                time.sleep(PARENT_POLL_S)
+        wait([sentinel])
         os._exit(1)
 
     threading.Thread(target=watch, name="tanbench-parent-watch", daemon=True).start()
