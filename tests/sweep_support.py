@@ -270,3 +270,32 @@ def counted(tasks: int, n_methods: int = len(METHODS)) -> str:
     """How the CLI counts tasks: '6 tasks (18 runs)' (a task is one run of a cell with every method)."""
     runs = tasks * n_methods
     return f"{tasks} task{'s' if tasks != 1 else ''} ({runs} run{'s' if runs != 1 else ''})"
+
+
+def child_pids(pid: int) -> list[int]:
+    """The child processes of process ``pid``, those of every thread of it (Linux /proc)."""
+    children = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            children += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            pass
+    return children
+
+
+def gone(pids, timeout: float = 30) -> bool:
+    """Whether the processes ``pids`` all end (or are zombies) within ``timeout`` seconds (Linux /proc)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        alive = [p for p in pids if Path(f"/proc/{p}").exists() and b"State:\tZ" not in _status(p)]
+        if not alive:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _status(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/status").read_bytes()
+    except OSError:
+        return b"State:\tZ"

@@ -24,8 +24,8 @@ import pytest
 
 from sweep_support import (
     ROOT, counted,
-    assert_same_runs, cli, cli_env, finished_runs, kill_group, load_tables, start_cli, sweep_dict, wait_for_runs,
-    write_sweep,
+    assert_same_runs, child_pids, cli, cli_env, finished_runs, gone, kill_group, load_tables, start_cli, sweep_dict,
+    wait_for_runs, write_sweep,
 )
 from tanbench import results
 from tanbench.runner.executors import WORKER_NAME
@@ -213,38 +213,15 @@ def worker_pids(pid: int) -> list[int]:
 
     Every thread's children: a Dask nanny starts its worker from the cluster's event-loop thread.
     """
-    children = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            children += (task / "children").read_text().split()
-        except OSError:
-            pass
     found = []
-    for child in children:
+    for child in child_pids(pid):
         try:
             if (Path(f"/proc/{child}/comm").read_bytes().strip() == WORKER_NAME
                     or b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes()):
-                found.append(int(child))
+                found.append(child)
         except OSError:
             pass
     return found
-
-
-def gone(pids, timeout: float = 30) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        alive = [p for p in pids if Path(f"/proc/{p}").exists() and b"State:\tZ" not in _status(p)]
-        if not alive:
-            return True
-        time.sleep(0.1)
-    return False
-
-
-def _status(pid: int) -> bytes:
-    try:
-        return Path(f"/proc/{pid}/status").read_bytes()
-    except OSError:
-        return b"State:\tZ"
 
 
 needs_proc = pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="finds worker processes in /proc")

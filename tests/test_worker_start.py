@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from sweep_support import ROOT, assert_same_runs, cli, cli_env, sweep_dict, write_sweep
+from sweep_support import ROOT, assert_same_runs, child_pids, cli, cli_env, gone, sweep_dict, write_sweep
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="workers are forked on Linux only")
 
@@ -86,29 +86,17 @@ def test_a_sweep_from_a_threaded_process_equals_the_cli_s(tmp_path):
     assert_same_runs(pd.read_parquet(tmp_path / "api" / "runs"), pd.read_parquet(tmp_path / "cli" / "runs"))
 
 
-def _running(pid: int) -> bool:
-    try:
-        return b"State:\tZ" not in Path(f"/proc/{pid}/status").read_bytes()
-    except OSError:
-        return False
-
-
 def _descendants_named(pid: int, name: bytes) -> list[int]:
     found, todo = [], [pid]
     while todo:
-        parent = todo.pop()
-        for task in Path(f"/proc/{parent}/task").glob("*"):
+        children = child_pids(todo.pop())
+        todo += children
+        for child in children:
             try:
-                children = [int(c) for c in (task / "children").read_text().split()]
+                if Path(f"/proc/{child}/comm").read_bytes().strip() == name:
+                    found.append(child)
             except OSError:
-                continue
-            todo += children
-            for child in children:
-                try:
-                    if Path(f"/proc/{child}/comm").read_bytes().strip() == name:
-                        found.append(child)
-                except OSError:
-                    pass
+                pass
     return found
 
 
@@ -135,10 +123,7 @@ def test_fork_server_workers_die_with_the_process_that_started_them(tmp_path):
         assert proc.pid not in parents, "not forked from the fork server"
         proc.kill()
         proc.wait(timeout=30)
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and any(_running(w) for w in workers):
-            time.sleep(0.2)
-        assert not [w for w in workers if _running(w)], "worker processes outlived the process that started them"
+        assert gone(workers, timeout=20), "worker processes outlived the process that started them"
     finally:
         for pid in [proc.pid, *workers]:
             try:
