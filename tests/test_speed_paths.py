@@ -147,3 +147,24 @@ def test_cells_merged_from_kept_rows_are_the_files_merged(tmp_path, monkeypatch)
         merged.append((store.cell_dir(out / "runs", "abc") / store.MERGED_RUNS).read_bytes())
         assert not list(store.cell_dir(out / "runs", "abc").glob("run-*.parquet"))
     assert merged[0] == merged[1]
+
+
+def test_kept_series_converted_together_are_the_files_read_back(tmp_path, monkeypatch):
+    """The series summary's frames: the session's tables converted together (results._series_frames)
+    give, concatenated, the frame of every file read back with its cell_id, row for row."""
+    from tanbench.results import _series_frames
+
+    monkeypatch.setattr(store, "read_meta", lambda path: {})
+    files, kept = [], SeriesWritten()
+    for i, (cell, methods) in enumerate([("a", ("tight-dvl", "loose-dvl")), ("a", ("tight-dvl", "loose-dvl")),
+                                         ("b", ("tight-sbe",)), ("b", ("tight-dvl", "loose-dvl"))]):
+        result = _result(k=20 + i, methods=methods)
+        table = series_table(result)
+        path = tmp_path / f"{cell}-run-{i:05d}.parquet"
+        store.write_table(table, path, {"schema": "x"}, **store.TASK_SERIES)
+        if i != 2:  # one file read back between kept ones
+            kept.keep(path, table)
+        files.append(((cell, path.name), path))
+    together = pd.concat(_series_frames(files, kept.tables), ignore_index=True)
+    read = pd.concat([store.read_parquet(p).assign(cell_id=c) for (c, _), p in files], ignore_index=True)
+    pd.testing.assert_frame_equal(together, read, check_exact=True)
