@@ -37,6 +37,7 @@ import pyarrow.parquet as pq
 
 from tanbench.errors import TanbenchError
 from tanbench import __version__
+from tanbench.schema import rows_table, run_schema
 
 SCHEMA_VERSION = 3  # 3: Hive-partitioned runs/cell_id=<id>/, one fixed run-file schema, merged cells
 META_KEY = b"tanbench"
@@ -345,8 +346,6 @@ def compact_cells(out: Path, cell_ids, kept: dict | None = None) -> None:
 def _source_tables(sources, kept: dict) -> list[pa.Table]:
     """The tables of ``sources`` in order: read from their files, or built from the rows ``kept``
     for them (one table for each run of consecutive kept files whose rows have one schema)."""
-    from tanbench.schema import rows_table, run_schema
-
     tables, group, group_schema = [], [], None
     for path in sources:
         rows = kept[path][0] if path in kept else None
