@@ -24,7 +24,7 @@ divergence statistic.
 Particles are columns of ``x`` (rows are states). The work runs beam by beam over all
 particles in passes that compile to SIMD instructions (``attitude_matrices``,
 ``tight_footprints``/``loose_footprints``, ``add_beam_terms``, ``finish_loglik``); the one
-scalar pass is the copy of the cells' corners (``terrain.grid.gather_cells``). The map-aware beams'
+scalar pass is the map look-up at the footprints (``terrain.grid.interpolate_cells``). The map-aware beams'
 logs are taken of products: one log per particle for the normalisers and one for the
 Student-t factors, every :data:`FOLD_BEAMS` beams (each factor is at least 1 and below
 about 1e38, so a product of that many stays finite).
@@ -42,7 +42,7 @@ from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_sin_cos, attitude_wound
 from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
-from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell, node_grid
+from tanbench.terrain.grid import bilinear_numpy, interpolate_cells, locate_cell, node_grid
 from tanbench.terrain.representation import filter_map_variance
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -78,26 +78,27 @@ FOLD_BEAMS = 8
 
 # the work arrays of the likelihood passes for one block of the cloud: the filter loops run
 # their particle passes block by block (at most BLOCK particles), so that the arrays one
-# block's passes touch stay in the core's caches. ``dcm`` (9, n) and ``stage`` (corners, n).
+# block's passes touch stay in the core's caches. ``dcm`` (9, n) and ``values`` (grids, n): the
+# map's height (and variance) at a beam's footprints (``terrain.grid.interpolate_cells``).
 BLOCK = 1000000
-LikelihoodWork = namedtuple("LikelihoodWork", "dcm cell tx ty pu stage norm student chi logs")
+LikelihoodWork = namedtuple("LikelihoodWork", "dcm cell tx ty pu values norm student chi logs")
 
 
 @nb.njit(cache=True)
 def new_likelihood_work(n, corners):
     """Work buffers for blocks of up to ``n`` particles and ``corners`` values per cell (4 per
-    map grid); :func:`work_block` shapes them for a block."""
+    map grid: ``4 * NodeGrid.grids``); :func:`work_block` shapes them for a block."""
     return LikelihoodWork(np.empty(9 * n), np.empty(n, dtype=np.int32), np.empty(n), np.empty(n), np.empty(n),
-                          np.empty(corners * n), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+                          np.empty(max(corners // 4, 1) * n), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
 
 
 @nb.njit(cache=True)
 def work_block(work, n):
     """The work arrays of a block of ``n`` particles, C-contiguous (the passes vectorise only on
     contiguous rows): views of the buffers of :func:`new_likelihood_work`."""
-    corners = work.stage.shape[0] // work.norm.shape[0]
+    grids = work.values.shape[0] // work.norm.shape[0]
     return LikelihoodWork(work.dcm[:9 * n].reshape((9, n)), work.cell[:n], work.tx[:n], work.ty[:n], work.pu[:n],
-                          work.stage[:corners * n].reshape((corners, n)), work.norm[:n], work.student[:n],
+                          work.values[:grids * n].reshape((grids, n)), work.norm[:n], work.student[:n],
                           work.chi[:n], work.logs[:n])
 
 
@@ -227,21 +228,21 @@ def loose_footprints(x, lo, oe, on, height, grid, cell, tx, ty, pu):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def add_beam_terms(stage, grids, cell, tx, ty, pu, su2, out2, mapaware, inv_nu, work):
+def add_beam_terms(values, cell, pu, su2, out2, mapaware, inv_nu, work):
     """Add one beam to every particle's terms: ``work.chi`` += d^2 / v and, map-aware, the
     normaliser product ``work.norm`` *= v / sigma_U^2 and the Student-t product
     ``work.student`` *= 1 + d^2 / (nu v) (``inv_nu`` = 1 / nu; 0 for the Gaussian, whose
-    factor is then 1). ``stage`` holds the footprints' cell corners of the ``grids`` grids
-    (``terrain.grid.gather_cells``; the variance grid second)."""
+    factor is then 1). ``values`` holds the map's height at the footprints and, map-aware, its
+    variance grid's (``terrain.grid.interpolate_cells``)."""
     norm = work.norm
     student = work.student
     chi = work.chi
     inv_su2 = 1.0 / su2
-    heights = cell_corners(stage, 0, grids)
-    variances = cell_corners(stage, 1 if mapaware else 0, grids)
+    heights = values[0]
+    variances = values[1 if mapaware else 0]
     for j in range(cell.shape[0]):
-        h = cell_value(heights, j, tx[j], ty[j])
-        mv = cell_value(variances, j, tx[j], ty[j]) if mapaware else 0.0
+        h = heights[j]
+        mv = variances[j] if mapaware else 0.0
         ok = (cell[j] >= 0) & (h == h) & (mv == mv)
         v = su2 + mv if ok else su2
         d = pu[j] - h
@@ -294,8 +295,8 @@ def finish_loglik(work, mapaware, student, half_nu1, dist, with_dist, inv_d2, ou
 def _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i):
     """The map rows and terms of beam ``i`` (its footprints in ``work``); folds the products
     every FOLD_BEAMS beams."""
-    gather_cells(work.cell, grid.nodes, grid.grids, grid.nx, work.stage)
-    add_beam_terms(work.stage, grid.grids, work.cell, work.tx, work.ty, work.pu, su2, out2, lik.mapaware, inv_nu, work)
+    interpolate_cells(work.cell, work.tx, work.ty, grid.nodes, grid.grids, grid.nx, work.values)
+    add_beam_terms(work.values, work.cell, work.pu, su2, out2, lik.mapaware, inv_nu, work)
     if lik.mapaware and (i + 1) % FOLD_BEAMS == 0 and i + 1 < used:
         fold_beam_terms(work, half_nu1)
 
