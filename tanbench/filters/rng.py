@@ -46,7 +46,7 @@ from numba.extending import NativeValue
 from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 
 from tanbench.filters import FASTMATH
-from tanbench.filters.vecmath import bits_float, exact_float_53
+from tanbench.filters.vecmath import bits_float
 
 STATE_WORDS = 4  # one xoshiro256++ state
 LANES = 16  # lanes stepped together (4 AVX2 vectors of 4 words)
@@ -102,6 +102,12 @@ def ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 
 
 ZIG_KI, ZIG_WI, ZIG_FI, ZIG_R = ziggurat_tables()
+# the same tables for the SIMD loop of :func:`normals_from_words`: the layer edges x[i] = WI[i] 2^52
+# (exact: a power-of-two scaling), so that u * WI[i] = (u 2^-52) * x[i] bit for bit, with u 2^-52
+# made from the bits of u (:func:`word_uniform`) rather than by an int64 -> float64 conversion;
+# and KI as int64 (every entry is below 2^52: a signed compare, which AVX2 has, gives the unsigned one)
+ZIG_X = ZIG_WI * float(1 << 52)
+ZIG_KI_SIGNED = ZIG_KI.astype(np.int64)
 
 
 # ---- xoshiro256++ -------------------------------------------------------------------------
@@ -186,15 +192,16 @@ def normal_slow(s, u):
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def normals_from_words(w, s, out):
     """Ziggurat normals into ``out`` from the words ``w`` (one each), the rare misses finished
-    from the scalar stream ``s``. The sign is applied by a multiplication, not a branch."""
+    from the scalar stream ``s``. The sign is applied by a multiplication, not a branch. The
+    rectangle's point u * WI[i] (u the 52-bit abscissa) is computed as (u 2^-52) * x[i]: the
+    same bits (:data:`ZIG_X`)."""
     misses = 0
     for j in range(out.shape[0]):  # the rectangles: a SIMD loop (no call, no branch)
         u = w[j]
         i = np.intp(u & np.uint64(0xFF))
-        rabs = u >> np.uint64(12)
         sign = -1.0 if (u >> np.uint64(8)) & np.uint64(1) else 1.0
-        out[j] = exact_float_53(np.int64(rabs)) * ZIG_WI[i] * sign
-        misses += 0 if rabs < ZIG_KI[i] else 1
+        out[j] = word_uniform(u) * ZIG_X[i] * sign
+        misses += 0 if np.int64(u >> np.uint64(12)) < ZIG_KI_SIGNED[i] else 1
     if misses > 0:
         for j in range(out.shape[0]):  # the misses, in order, from the scalar stream
             u = w[j]
