@@ -168,12 +168,13 @@ def kernel_breakdown(particles: int = 3000, reps: int = 30) -> dict:
     x[:] = x0
     t["attitude matrices (3 sin/cos)"] = per(lambda: L.attitude_matrices(x, 0, s["att"], work.dcm))
     beams = vec.shape[0]
-    t[f"footprints and cells (x{beams} beams)"] = beams * per(
-        lambda: L.tight_footprints(x, 0, work.dcm, *vec[0], grid, work.cell, work.tx, work.ty, work.pu))
+    t[f"footprints and cells (x{beams} beams, in pairs)"] = beams / 2 * per(
+        lambda: L.tight_footprint_pair(x, 0, work.dcm, vec, 0, grid, work.cell, work.tx, work.ty, work.pu))
     t[f"map values at the footprints (x{beams} beams, scalar)"] = beams * per(
-        lambda: interpolate_cells(work.cell, work.tx, work.ty, grid.nodes, grid.grids, grid.nx, work.values))
-    t[f"beam terms (x{beams} beams)"] = beams * per(
-        lambda: L.add_beam_terms(work.values, work.cell, work.pu, su2, out2, lik.mapaware, inv_nu, work))
+        lambda: interpolate_cells(work.cell[0], work.tx[0], work.ty[0], grid.nodes, grid.grids, grid.nx, work.values))
+    t[f"beam terms (x{beams} beams, in pairs)"] = beams / 2 * per(
+        lambda: L.add_beam_term_pair(work.values, grid.grids, work.cell, work.pu, su2, out2, lik.mapaware, inv_nu,
+                                     work))
     t["log-likelihoods (2 logs)"] = per(lambda: L.finish_loglik(work, lik.mapaware, student, half_nu1, dist, False,
                                                                 inv_d2, ll))
     t[f"whole likelihood pass ({beams} beams, map-aware Student-t)"] = per(
