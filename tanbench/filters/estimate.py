@@ -23,7 +23,9 @@ from tanbench.filters import FASTMATH
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def _wrap(a):
-    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+    # np.floor, a float: numba's math.floor returns an integer (two conversions per particle); the
+    # same value for any finite angle (an infinite one now gives NaN, as numpy's reference does)
+    return a - 2.0 * math.pi * np.floor((a + math.pi) / (2.0 * math.pi))
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)

@@ -24,7 +24,7 @@ divergence statistic.
 Particles are columns of ``x`` (rows are states). The work runs beam by beam over all
 particles in passes that compile to SIMD instructions (``attitude_matrices``,
 ``tight_footprints``/``loose_footprints``, ``add_beam_terms``, ``finish_loglik``); the one
-scalar pass is the copy of the cells' corners (``terrain.grid.gather_cells``). The map-aware beams'
+scalar pass is the map look-up at the footprints (``terrain.grid.interpolate_cells``). The map-aware beams'
 logs are taken of products: one log per particle for the normalisers and one for the
 Student-t factors, every :data:`FOLD_BEAMS` beams (each factor is at least 1 and below
 about 1e38, so a product of that many stays finite).
@@ -42,7 +42,7 @@ from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_sin_cos, attitude_wound
 from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
-from tanbench.terrain.grid import bilinear_numpy, cell_corners, cell_value, gather_cells, locate_cell, node_grid
+from tanbench.terrain.grid import bilinear_numpy, interpolate_cells, locate_cell, node_grid
 from tanbench.terrain.representation import filter_map_variance
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -78,26 +78,31 @@ FOLD_BEAMS = 8
 
 # the work arrays of the likelihood passes for one block of the cloud: the filter loops run
 # their particle passes block by block (at most BLOCK particles), so that the arrays one
-# block's passes touch stay in the core's caches. ``dcm`` (9, n) and ``stage`` (corners, n).
+# block's passes touch stay in the core's caches. ``dcm`` (9, n); ``cell``, ``tx``, ``ty``, ``pu``
+# (2, n): the footprints of two beams (:func:`tight_footprint_pair`); ``values`` (2 grids, n): the
+# map's height (and variance) at the two beams' footprints (``terrain.grid.interpolate_cells``).
 BLOCK = 1000000
-LikelihoodWork = namedtuple("LikelihoodWork", "dcm cell tx ty pu stage norm student chi logs")
+LikelihoodWork = namedtuple("LikelihoodWork", "dcm cell tx ty pu values norm student chi logs")
 
 
 @nb.njit(cache=True)
 def new_likelihood_work(n, corners):
     """Work buffers for blocks of up to ``n`` particles and ``corners`` values per cell (4 per
-    map grid); :func:`work_block` shapes them for a block."""
-    return LikelihoodWork(np.empty(9 * n), np.empty(n, dtype=np.int32), np.empty(n), np.empty(n), np.empty(n),
-                          np.empty(corners * n), np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+    map grid: ``4 * NodeGrid.grids``); :func:`work_block` shapes them for a block."""
+    return LikelihoodWork(np.empty(9 * n), np.empty(2 * n, dtype=np.int32), np.empty(2 * n), np.empty(2 * n),
+                          np.empty(2 * n), np.empty(2 * max(corners // 4, 1) * n), np.empty(n), np.empty(n), np.empty(n),
+                          np.empty(n))
 
 
 @nb.njit(cache=True)
 def work_block(work, n):
     """The work arrays of a block of ``n`` particles, C-contiguous (the passes vectorise only on
     contiguous rows): views of the buffers of :func:`new_likelihood_work`."""
-    corners = work.stage.shape[0] // work.norm.shape[0]
-    return LikelihoodWork(work.dcm[:9 * n].reshape((9, n)), work.cell[:n], work.tx[:n], work.ty[:n], work.pu[:n],
-                          work.stage[:corners * n].reshape((corners, n)), work.norm[:n], work.student[:n],
+    rows = work.values.shape[0] // work.norm.shape[0]
+    return LikelihoodWork(work.dcm[:9 * n].reshape((9, n)), work.cell[:2 * n].reshape((2, n)),
+                          work.tx[:2 * n].reshape((2, n)), work.ty[:2 * n].reshape((2, n)),
+                          work.pu[:2 * n].reshape((2, n)),
+                          work.values[:rows * n].reshape((rows, n)), work.norm[:n], work.student[:n],
                           work.chi[:n], work.logs[:n])
 
 
@@ -197,20 +202,48 @@ def _attitude_loop(pitch, roll, yaw, att, dcm, near):
         c22[j] = ct * cg
 
 
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _footprint(e, nn, u, c00, c01, c02, c10, c11, c12, c20, c21, c22, a0, a1, a2, grid):
+    """The footprint of beam ``(a0, a1, a2)`` from (e, nn, u) with attitude matrix c: its map
+    cell, position in the cell and height (cell, tx, ty, pu)."""
+    _, _, e0, n0, inv_re, inv_rn, nx, ny = grid
+    pe = e + c00 * a0 + c01 * a1 + c02 * a2
+    pn = nn + c10 * a0 + c11 * a1 + c12 * a2
+    pu = u + c20 * a0 + c21 * a1 + c22 * a2
+    cell, tx, ty = locate_cell(pe, pn, e0, n0, inv_re, inv_rn, nx, ny)
+    return cell, tx, ty, pu
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def tight_footprints(x, lo, dcm, a0, a1, a2, grid, cell, tx, ty, pu):
     """Beam ``(a0, a1, a2)`` (body frame, times its range) seen from particles ``lo ..``, with
     their attitude matrices ``dcm`` (9, n): its footprint's map cell (``cell``, -1 off the map),
     position in the cell (``tx``, ``ty``) and height (``pu``)."""
-    _, _, e0, n0, inv_re, inv_rn, nx, ny = grid
     n = dcm.shape[1]
     e, nn, u = x[E, lo:lo + n], x[N, lo:lo + n], x[U, lo:lo + n]
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
     for j in range(n):
-        pe = e[j] + c00[j] * a0 + c01[j] * a1 + c02[j] * a2
-        pn = nn[j] + c10[j] * a0 + c11[j] * a1 + c12[j] * a2
-        pu[j] = u[j] + c20[j] * a0 + c21[j] * a1 + c22[j] * a2
-        cell[j], tx[j], ty[j] = locate_cell(pe, pn, e0, n0, inv_re, inv_rn, nx, ny)
+        cell[j], tx[j], ty[j], pu[j] = _footprint(e[j], nn[j], u[j], c00[j], c01[j], c02[j], c10[j], c11[j], c12[j],
+                                                  c20[j], c21[j], c22[j], a0, a1, a2, grid)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def tight_footprint_pair(x, lo, dcm, vec, i, grid, cell, tx, ty, pu):
+    """:func:`tight_footprints` of beams ``i`` and ``i + 1`` of ``vec`` (``beam_vectors``) in one
+    pass (each particle's matrix read once), into rows 0 and 1 of ``cell``, ``tx``, ``ty``,
+    ``pu`` (2, n). (Two beams a pass: with four, LLVM no longer vectorised the loop.)"""
+    n = dcm.shape[1]
+    e, nn, u = x[E, lo:lo + n], x[N, lo:lo + n], x[U, lo:lo + n]
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
+    a0, a1, a2, b0, b1, b2 = vec[i, 0], vec[i, 1], vec[i, 2], vec[i + 1, 0], vec[i + 1, 1], vec[i + 1, 2]
+    cell_a, tx_a, ty_a, pu_a, cell_b, tx_b, ty_b, pu_b = cell[0], tx[0], ty[0], pu[0], cell[1], tx[1], ty[1], pu[1]
+    for j in range(n):
+        m00, m01, m02, m10, m11, m12 = c00[j], c01[j], c02[j], c10[j], c11[j], c12[j]
+        m20, m21, m22 = c20[j], c21[j], c22[j]
+        cell_a[j], tx_a[j], ty_a[j], pu_a[j] = _footprint(e[j], nn[j], u[j], m00, m01, m02, m10, m11, m12, m20, m21,
+                                                          m22, a0, a1, a2, grid)
+        cell_b[j], tx_b[j], ty_b[j], pu_b[j] = _footprint(e[j], nn[j], u[j], m00, m01, m02, m10, m11, m12, m20, m21,
+                                                          m22, b0, b1, b2, grid)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -227,28 +260,54 @@ def loose_footprints(x, lo, oe, on, height, grid, cell, tx, ty, pu):
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def add_beam_terms(stage, grids, cell, tx, ty, pu, su2, out2, mapaware, inv_nu, work):
+def add_beam_terms(values, cell, pu, su2, out2, mapaware, inv_nu, work):
     """Add one beam to every particle's terms: ``work.chi`` += d^2 / v and, map-aware, the
     normaliser product ``work.norm`` *= v / sigma_U^2 and the Student-t product
     ``work.student`` *= 1 + d^2 / (nu v) (``inv_nu`` = 1 / nu; 0 for the Gaussian, whose
-    factor is then 1). ``stage`` holds the footprints' cell corners of the ``grids`` grids
-    (``terrain.grid.gather_cells``; the variance grid second)."""
+    factor is then 1). ``values`` holds the map's height at the footprints and, map-aware, its
+    variance grid's (``terrain.grid.interpolate_cells``)."""
     norm = work.norm
     student = work.student
     chi = work.chi
     inv_su2 = 1.0 / su2
-    heights = cell_corners(stage, 0, grids)
-    variances = cell_corners(stage, 1 if mapaware else 0, grids)
+    heights = values[0]
+    variances = values[1 if mapaware else 0]
     for j in range(cell.shape[0]):
-        h = cell_value(heights, j, tx[j], ty[j])
-        mv = cell_value(variances, j, tx[j], ty[j]) if mapaware else 0.0
-        ok = (cell[j] >= 0) & (h == h) & (mv == mv)
-        v = su2 + mv if ok else su2
-        d = pu[j] - h
-        q = d * d / v if ok else out2
+        q, v = _beam_term(heights[j], variances[j], cell[j], pu[j], su2, out2, mapaware)
         chi[j] += q
         norm[j] *= v * inv_su2
         student[j] *= 1.0 + q * inv_nu
+
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _beam_term(h, mv, cell, pu, su2, out2, mapaware):
+    """(d^2 / v, v) of one beam at one particle: map height ``h`` and variance ``mv`` (0 unless
+    ``mapaware``) at its footprint in ``cell``, its height ``pu``."""
+    mv = mv if mapaware else 0.0
+    ok = (cell >= 0) & (h == h) & (mv == mv)
+    v = su2 + mv if ok else su2
+    d = pu - h
+    return (d * d / v if ok else out2), v
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def add_beam_term_pair(values, grids, cell, pu, su2, out2, mapaware, inv_nu, work):
+    """:func:`add_beam_terms` of two beams in one pass, the first then the second (the same
+    operations in the same order): their footprints in rows 0 and 1 of ``cell`` and ``pu``,
+    their map values in rows 0 .. grids - 1 and grids .. 2 grids - 1 of ``values``."""
+    norm = work.norm
+    student = work.student
+    chi = work.chi
+    inv_su2 = 1.0 / su2
+    ha, hb = values[0], values[grids]
+    va, vb = values[1 if mapaware else 0], values[grids + 1 if mapaware else grids]
+    cell_a, cell_b, pu_a, pu_b = cell[0], cell[1], pu[0], pu[1]
+    for j in range(cell_a.shape[0]):
+        qa, vva = _beam_term(ha[j], va[j], cell_a[j], pu_a[j], su2, out2, mapaware)
+        qb, vvb = _beam_term(hb[j], vb[j], cell_b[j], pu_b[j], su2, out2, mapaware)
+        chi[j] = (chi[j] + qa) + qb
+        norm[j] = (norm[j] * (vva * inv_su2)) * (vvb * inv_su2)
+        student[j] = (student[j] * (1.0 + qa * inv_nu)) * (1.0 + qb * inv_nu)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -291,11 +350,29 @@ def finish_loglik(work, mapaware, student, half_nu1, dist, with_dist, inv_d2, ou
 
 
 @nb.njit(cache=True)
-def _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i):
-    """The map rows and terms of beam ``i`` (its footprints in ``work``); folds the products
-    every FOLD_BEAMS beams."""
-    gather_cells(work.cell, grid.nodes, grid.grids, grid.nx, work.stage)
-    add_beam_terms(work.stage, grid.grids, work.cell, work.tx, work.ty, work.pu, su2, out2, lik.mapaware, inv_nu, work)
+def _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i, r):
+    """The map values and terms of beam ``i`` (its footprints in row ``r`` of ``work``'s); folds
+    the products every FOLD_BEAMS beams."""
+    cell, pu = work.cell[r], work.pu[r]
+    interpolate_cells(cell, work.tx[r], work.ty[r], grid.nodes, grid.grids, grid.nx, work.values)
+    add_beam_terms(work.values, cell, pu, su2, out2, lik.mapaware, inv_nu, work)
+    _fold_after(lik, half_nu1, work, used, i)
+
+
+@nb.njit(cache=True)
+def _beam_pair_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i):
+    """:func:`_beam_pass` of beams ``i`` and ``i + 1`` (``i`` even), their footprints in rows 0
+    and 1 of ``work``'s."""
+    g = grid.grids
+    interpolate_cells(work.cell[0], work.tx[0], work.ty[0], grid.nodes, g, grid.nx, work.values[:g])
+    interpolate_cells(work.cell[1], work.tx[1], work.ty[1], grid.nodes, g, grid.nx, work.values[g:2 * g])
+    add_beam_term_pair(work.values, g, work.cell, work.pu, su2, out2, lik.mapaware, inv_nu, work)
+    _fold_after(lik, half_nu1, work, used, i + 1)  # FOLD_BEAMS is even: never between the two
+
+
+@nb.njit(cache=True, inline="always")
+def _fold_after(lik, half_nu1, work, used, i):
+    """Fold the products into the log sum after beam ``i`` every FOLD_BEAMS beams (not after the last)."""
     if lik.mapaware and (i + 1) % FOLD_BEAMS == 0 and i + 1 < used:
         fold_beam_terms(work, half_nu1)
 
@@ -319,10 +396,14 @@ def loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist, with_dist, work,
     used = vec.shape[0]
     attitude_matrices(x, lo, att, work.dcm)
     start_beam_terms(work)
-    for i in range(used):
-        tight_footprints(x, lo, work.dcm, vec[i, 0], vec[i, 1], vec[i, 2], grid, work.cell, work.tx, work.ty,
-                         work.pu)
-        _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i)
+    for i in range(0, used - 1, 2):  # the beams in pairs (the terms still added beam by beam, in order)
+        tight_footprint_pair(x, lo, work.dcm, vec, i, grid, work.cell, work.tx, work.ty, work.pu)
+        _beam_pair_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i)
+    if used % 2 == 1:
+        i = used - 1
+        tight_footprints(x, lo, work.dcm, vec[i, 0], vec[i, 1], vec[i, 2], grid, work.cell[0], work.tx[0],
+                         work.ty[0], work.pu[0])
+        _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i, 0)
     best = finish_loglik(work, lik.mapaware, student, half_nu1, dist, with_dist, inv_d2, out)
     return best / used if used > 0 else np.inf
 
@@ -337,8 +418,9 @@ def loglik_loose_pass(x, lo, rows, up, grid, lik, consts, work, out):
     used = rows.shape[0]
     start_beam_terms(work)
     for i in range(used):
-        loose_footprints(x, lo, rows[i, 0], rows[i, 1], up + rows[i, 2], grid, work.cell, work.tx, work.ty, work.pu)
-        _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i)
+        loose_footprints(x, lo, rows[i, 0], rows[i, 1], up + rows[i, 2], grid, work.cell[0], work.tx[0], work.ty[0],
+                         work.pu[0])
+        _beam_pass(grid, lik, su2, out2, inv_nu, half_nu1, work, used, i, 0)
     best = finish_loglik(work, lik.mapaware, student, half_nu1, work.dcm, False, 0.0, out)
     return best / used if used > 0 else np.inf
 

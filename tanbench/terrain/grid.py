@@ -164,10 +164,10 @@ def bilinear_numpy(z, e0, n0, inv_re, inv_rn, e, n):
 # The particle filters look the map up at millions of points per run. They read it as a
 # :class:`NodeGrid`: the nodes of one or two grids on the same nodes (the map's heights, then
 # the map-aware likelihood's variance grid) interleaved node by node, so that a look-up reads
-# both from the same cache lines. The look-up is split so that the arithmetic vectorises:
-# :func:`locate_cells` (SIMD) finds each point's cell, :func:`gather_cells` copies the cell's
-# four corner nodes (two runs of two neighbouring nodes: the one scalar loop), and
-# :func:`cell_value` interpolates them in the caller's SIMD loop, as :func:`bilinear` does.
+# both from the same cache lines. The look-up is split so that most of it vectorises:
+# :func:`locate_cells` (SIMD) finds each point's cell, and :func:`interpolate_cells` reads the
+# cell's four corner nodes (two runs of two neighbouring nodes) and interpolates them, as
+# :func:`bilinear` does: the one scalar loop.
 NodeGrid = namedtuple("NodeGrid", "nodes grids e0 n0 inv_re inv_rn nx ny")
 MAX_NODES = 2**31 - 1  # node indices are int32 (they vectorise; int64 conversions do not with AVX2)
 
@@ -208,51 +208,29 @@ def locate_cells(e, n, e0, n0, inv_re, inv_rn, nx, ny, cell, tx, ty):
         cell[j], tx[j], ty[j] = locate_cell(e[j], n[j], e0, n0, inv_re, inv_rn, nx, ny)
 
 
-@nb.njit(cache=True, error_model="numpy")
-def gather_cells(cell, nodes, grids, nx, stage):
-    """Copy each point's four cell corners into column ``j`` of ``stage`` (4 grids, M): rows
-    z00, z01, z10, z11, each corner with its ``grids`` values (``NodeGrid`` order); cell 0 where
-    ``cell[j]`` is -1 (read, never used)."""
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def interpolate_cells(cell, tx, ty, nodes, grids, nx, values):
+    """Bilinear value of each of the ``grids`` grids of ``nodes`` (``NodeGrid`` order) at every
+    point, from its cell ``cell[j]`` and position (``tx[j]``, ``ty[j]``) in it: row ``g`` of
+    ``values`` (grids, M) for grid ``g``; the same arithmetic as :func:`bilinear`. Where
+    ``cell[j]`` is -1 cell 0 is read (its value is never used). The one scalar loop of the
+    look-up: its loads follow the points; it stores two values per point, where a copy of the
+    cell's corners for a SIMD loop to interpolate stored eight (docs/speed.md 0b)."""
     if grids == 2:
         row = 2 * nx
-        s0, s1, s2, s3, s4, s5, s6, s7 = stage[0], stage[1], stage[2], stage[3], stage[4], stage[5], stage[6], stage[7]
-        for j in range(cell.shape[0]):  # the rows as 1-D views: no 2-D index arithmetic per value
+        h, v = values[0], values[1]
+        for j in range(cell.shape[0]):  # the corners as 1-D views: no 2-D index arithmetic per value
             k = 2 * max(cell[j], 0)
             low = nodes[k:k + 4]
             high = nodes[k + row:k + row + 4]
-            s0[j], s1[j], s2[j], s3[j] = low[0], low[1], low[2], low[3]
-            s4[j], s5[j], s6[j], s7[j] = high[0], high[1], high[2], high[3]
+            a, b = tx[j], ty[j]
+            h[j] = _bilinear_weights(low[0], low[2], high[0], high[2], a, b)
+            v[j] = _bilinear_weights(low[1], low[3], high[1], high[3], a, b)
     else:
+        h = values[0]
         for j in range(cell.shape[0]):
             k = max(cell[j], 0)
-            stage[0, j] = nodes[k]
-            stage[1, j] = nodes[k + 1]
-            stage[2, j] = nodes[k + nx]
-            stage[3, j] = nodes[k + nx + 1]
-
-
-@nb.njit(cache=True, inline="always")
-def cell_corners(stage, grid, grids):
-    """The rows of ``stage`` (:func:`gather_cells`) with grid ``grid``'s (0 or 1 of ``grids``)
-    corners z00, z01, z10, z11, as 1-D views (loops over them vectorise)."""
-    return stage[grid], stage[grids + grid], stage[2 * grids + grid], stage[3 * grids + grid]
-
-
-@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def cell_value(corners, j, tx, ty):
-    """Bilinear value at (tx, ty) of point ``j``'s cell, from its corners (:func:`cell_corners`);
-    the same arithmetic as :func:`bilinear`."""
-    z00, z01, z10, z11 = corners
-    return _bilinear_weights(z00[j], z01[j], z10[j], z11[j], tx, ty)
-
-
-@nb.njit(cache=True, error_model="numpy")
-def cell_values(stage, cell, tx, ty, grid, grids, out):
-    """:func:`cell_value` of every point into ``out`` (NaN where ``cell`` is -1)."""
-    corners = cell_corners(stage, grid, grids)
-    for j in range(out.shape[0]):
-        v = cell_value(corners, j, tx[j], ty[j])
-        out[j] = v if cell[j] >= 0 else np.nan
+            h[j] = _bilinear_weights(nodes[k], nodes[k + 1], nodes[k + nx], nodes[k + nx + 1], tx[j], ty[j])
 
 
 def node_grid_at(grid: NodeGrid, e, n, which: int = 0) -> np.ndarray:
@@ -262,8 +240,6 @@ def node_grid_at(grid: NodeGrid, e, n, which: int = 0) -> np.ndarray:
     n = np.ascontiguousarray(n, dtype=np.float64)
     cell, tx, ty = np.empty(e.size, dtype=np.int32), np.empty(e.size), np.empty(e.size)
     locate_cells(e, n, grid.e0, grid.n0, grid.inv_re, grid.inv_rn, grid.nx, grid.ny, cell, tx, ty)
-    stage = np.empty((4 * grid.grids, e.size))
-    gather_cells(cell, grid.nodes, grid.grids, grid.nx, stage)
-    out = np.empty(e.size)
-    cell_values(stage, cell, tx, ty, which, grid.grids, out)
-    return out
+    values = np.empty((grid.grids, e.size))
+    interpolate_cells(cell, tx, ty, grid.nodes, grid.grids, grid.nx, values)
+    return np.where(cell >= 0, values[which], np.nan)
