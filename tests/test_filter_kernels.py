@@ -822,6 +822,13 @@ def test_blocks_with_wound_angles_give_the_bits_of_sin_cos():
                 ref(x2, *args, dist2, att, lo)
             assert np.array_equal(x1, x2, equal_nan=True) and np.array_equal(dist1, dist2, equal_nan=True)
             assert np.isnan(x1).any() == wound
+    for yaw in (0.3, -2e6, 5e15, np.nan):  # the loose loops' corrected navigation: one particle, no noise
+        one = rng.normal(0.0, 1.0, (8, 1))
+        one[YAW, 0] = yaw
+        two = one.copy()
+        prop.dead_reckon(one, inc, 0.25)
+        propagate_ref(two, inc, 0.25, np.zeros((6, 1)), 0.0, 0.0, 0.0, prop.DIST_NONE, np.zeros((2, 1)), 0.0, 0)
+        assert np.array_equal(one, two, equal_nan=True)
 
 
 def _sin_cos_loops():

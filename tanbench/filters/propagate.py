@@ -169,6 +169,19 @@ def _propagate_tight_wound(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, di
             dist[1][j] = shared.d0n - dn
 
 
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def dead_reckon(x, inc, yaw_nav0):
+    """:func:`propagate_tight` of one particle (``x`` (8, 1)) without noise or distance
+    innovations (``DIST_NONE``): the loose loops' corrected navigation, with the same bits, compiled
+    without the SIMD pass and its wound-angle twin (the offset unwound, ``trig.unwound``)."""
+    zero = np.zeros((6, 1))
+    rows, nz, dist = _block_views(x, 0, zero, zero[:2])
+    bx, bz = rows[6][0], rows[7][0]
+    de, dn = _displacement(0.0, 1.0, unwound(rows[5][0] - yaw_nav0), bx, bz, _lever(inc), 0.0, nz[0][0], nz[1][0])
+    _move_particle(rows, nz, dist, 0, de, dn, inc[DYAW] + bx * inc[SX] - bz * inc[SZ],
+                   shared_motion(inc, 0.0, 0.0, DIST_NONE))
+
+
 @nb.njit(cache=True, inline="always")
 def _lever(inc):
     """The navigation displacement and its gyro-bias lever terms of one increments row:
