@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from tanbench import store
 from tanbench.errors import TanbenchError
@@ -295,6 +296,32 @@ def series_summary(frames: list[pd.DataFrame]) -> pd.DataFrame:
     return out.astype({c: "float32" for c in floats})
 
 
+def _series_frames(files, written: dict) -> list[pd.DataFrame]:
+    """The runs' series frames with their ``cell_id``, in the order of ``files`` ((cell, name), path):
+    read from the files, except those the session ``written`` (Arrow tables), of which each run of
+    consecutive ones with one schema is converted to pandas together, as one frame of the same rows
+    in the same order (one conversion instead of one per file)."""
+    frames, group = [], []
+
+    def convert_group():
+        if group:
+            tables = [t.append_column("cell_id", pa.array([cell] * t.num_rows, pa.string())) for cell, t in group]
+            frames.append(pa.concat_tables(tables).to_pandas())
+            group.clear()
+
+    for (cell, _), path in files:
+        table = written.get(path)
+        if table is not None and group and table.schema != group[0][1].schema:
+            convert_group()
+        if table is not None:
+            group.append((cell, table))
+            continue
+        convert_group()
+        frames.append(store.read_parquet(path).assign(cell_id=cell))
+    convert_group()
+    return frames
+
+
 def build_outputs(out: Path, sweep, series: str, written: dict | None = None) -> dict[str, pd.DataFrame]:
     """Write series/summary.parquet (if series are kept) and tables/ for ``sweep``.
 
@@ -312,8 +339,7 @@ def build_outputs(out: Path, sweep, series: str, written: dict | None = None) ->
             for f in _files(store.series_dir(out, full), "cell_id=*/run-*.parquet"):
                 if store.cell_of(f) in ids:
                     files[(store.cell_of(f), f.name)] = f
-        frames = [(written[f].to_pandas() if f in written else store.read_parquet(f)).assign(cell_id=cell)
-                  for (cell, _), f in sorted(files.items())]
+        frames = _series_frames(sorted(files.items()), written)
         summary_path = out / "series" / "summary.parquet"
         if frames and summary_path.exists():
             kept = store.read_parquet(summary_path)

@@ -108,7 +108,12 @@ def _coerce(value, typ: pa.DataType):
 def rows_table(rows: list[dict]) -> pa.Table:
     """Run rows as an Arrow table of the fixed run-file schema."""
     schema = run_schema(rows)
-    data = {f.name: [_coerce(row.get(f.name), f.type) for row in rows] for f in schema}
+    data = {}
+    for f in schema:
+        values = [row.get(f.name) for row in rows]
+        if not pa.types.is_floating(f.type):  # a float column takes every value as it is (_coerce's identity)
+            values = [_coerce(value, f.type) for value in values]
+        data[f.name] = values
     return pa.Table.from_pydict(data, schema=schema)
 
 

@@ -171,6 +171,8 @@ def simulate_vehicle(scenario: Scenario, seed: np.random.SeedSequence) -> Vehicl
     pos, pitch, roll, yaw = run_strapdown(
         truth.dt, gyro, nav_accel, dvl_velocity, depth, truth.pos[0, :2] + pos_err,
         truth.yaw[0] + yaw_err, truth.latitude_rad, nav_cfg.level_window_s, nav_cfg.level_compensation)
+    for arr in (pos, pitch, roll, yaw):  # read-only: the run's methods share what is derived from it
+        arr.setflags(write=False)
     obs = Observations(
         t=truth.t, dt=truth.dt, latitude_rad=truth.latitude_rad, gyro=gyro, accel=accel,
         dvl_velocity=dvl_velocity, depth=depth, ping_idx=ping_idx,

@@ -85,20 +85,29 @@ def write_parquet(df: pd.DataFrame, path: Path, meta: dict) -> None:
     write_table(pa.Table.from_pandas(df, preserve_index=False), path, meta)
 
 
-def write_table(table: pa.Table, path: Path, meta: dict) -> None:
+# how a finished task's files are encoded (``write_table(..., **TASK_ROWS)`` / ``TASK_SERIES``): a task's
+# run rows (3 rows of ~180 columns) uncompressed and a task's series without dictionaries, which
+# on such files cost more than they save (the CI-size sweep's task files: rows 9 -> 3.3 ms each,
+# 31 -> 26 kB; series 7 -> 2.9 ms, 314 -> 210 kB). The values read back are the same.
+TASK_ROWS = {"compression": "none", "dictionary": False}
+TASK_SERIES = {"compression": "zstd", "dictionary": False}
+
+
+def write_table(table: pa.Table, path: Path, meta: dict, compression: str = "zstd", dictionary: bool = True) -> None:
     """Write an Arrow ``table`` to ``path`` atomically with ``meta`` in the file's key-value metadata.
 
     The footer holds tanbench's metadata once: no pandas metadata (our frames have no index
     or pandas-only types), no serialised Arrow schema (which would repeat the metadata;
     our columns are plain numbers, booleans and strings, which Parquet's own types bring
     back exactly) and no column statistics (results are read whole). A 60-row cell's file
-    is then about a third of its former size, most of which was footer.
+    is then about a third of its former size, most of which was footer. ``compression`` and
+    ``dictionary`` (Parquet's dictionary encoding) change the bytes, never the values read back.
     """
     table = table.replace_schema_metadata(None)
 
     def write(fh):
-        with pq.ParquetWriter(fh, table.schema, compression="zstd", write_statistics=False,
-                              store_schema=False) as writer:
+        with pq.ParquetWriter(fh, table.schema, compression=compression, use_dictionary=dictionary,
+                              write_statistics=False, store_schema=False) as writer:
             writer.write_table(table)
             writer.add_key_value_metadata({META_KEY: json.dumps(meta).encode()})
 
@@ -293,7 +302,7 @@ def set_aside(path: Path) -> Path:
     return target
 
 
-def compact_cells(out: Path, cell_ids) -> None:
+def compact_cells(out: Path, cell_ids, kept: dict | None = None) -> None:
     """Merge each cell's per-task files into one ``runs/cell_id=<id>/runs.parquet``.
 
     One file per finished task keeps a running sweep safe to kill; once a session ends,
@@ -302,7 +311,13 @@ def compact_cells(out: Path, cell_ids) -> None:
     atomically before the task files are deleted; if a kill falls in between, the rows
     exist twice and :func:`tanbench.results.load` keeps one copy. A merged file in an
     older footer format (:func:`is_compact_format`) is rewritten, rows unchanged.
+
+    ``kept``: the task files this session wrote, by path, as (rows, metadata) (the engine's
+    :class:`~tanbench.runner.engine.SeriesWritten`): their tables are built again from the rows
+    (:func:`tanbench.schema.rows_table`, as they were written; consecutive files of one schema in
+    one table) instead of being read back. Any other file is read.
     """
+    kept = kept or {}
     for cell_id in cell_ids:
         directory = cell_dir(out / "runs", cell_id)
         parts = sorted(directory.glob("run-*.parquet"))
@@ -310,11 +325,12 @@ def compact_cells(out: Path, cell_ids) -> None:
         if not parts and (not merged_path.exists() or is_compact_format(merged_path)):
             continue
         sources = ([merged_path] if merged_path.exists() else []) + parts
-        tables = [pq.read_table(p) for p in sources]
-        meta = read_meta(sources[-1])
+        tables = _source_tables(sources, kept)
+        metas = [kept[p][1] if p in kept else read_meta(p) for p in sources]
+        meta = metas[-1]
         codes = {}
-        for p in sources:  # each user method's code identity, as of the newest file that ran it
-            codes.update(read_meta(p).get(CODE_META) or {})
+        for m in metas:  # each user method's code identity, as of the newest file that ran it
+            codes.update(m.get(CODE_META) or {})
         if codes:
             meta = {**meta, CODE_META: codes}
         table = pa.concat_tables([t.replace_schema_metadata(None) for t in tables], promote_options="default")
@@ -324,6 +340,27 @@ def compact_cells(out: Path, cell_ids) -> None:
                     merged_path, meta)
         for p in parts:
             p.unlink(missing_ok=True)
+
+
+def _source_tables(sources, kept: dict) -> list[pa.Table]:
+    """The tables of ``sources`` in order: read from their files, or built from the rows ``kept``
+    for them (one table for each run of consecutive kept files whose rows have one schema)."""
+    from tanbench.schema import rows_table, run_schema
+
+    tables, group, group_schema = [], [], None
+    for path in sources:
+        rows = kept[path][0] if path in kept else None
+        schema = run_schema(rows) if rows is not None else None
+        if group and (schema is None or schema != group_schema):
+            tables.append(rows_table(group))
+            group = []
+        if rows is None:
+            tables.append(pq.read_table(path))
+        else:
+            group, group_schema = group + rows, schema
+    if group:
+        tables.append(rows_table(group))
+    return tables
 
 
 def check_layout(out: Path) -> None:

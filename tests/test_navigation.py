@@ -128,6 +128,40 @@ def test_increments_jit_matches_numpy_reference(paper_run, synthetic_nav):
     assert compute_increments(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, np.array([5])).shape == (0, 12)
 
 
+def test_increments_computed_once_for_a_runs_methods(paper_run, monkeypatch):
+    """The methods of a run (each with its own read-only views of the run's navigation solution,
+    read-only since simulated) get the table computed once, as a copy of their own; writeable
+    arrays, other updates or another dt are computed again, with the same numbers."""
+    from tanbench.methods.api import method_inputs
+    from tanbench.terrain.grid import Map
+
+    calls = []
+    kernel = inc.interval_increments
+    monkeypatch.setattr(inc, "interval_increments", lambda *a: calls.append(1) or kernel(*a))
+    monkeypatch.setattr(inc, "_LAST", [None])
+    nav, dt = paper_run.obs.nav, paper_run.obs.dt
+    assert not any(a.flags.writeable for a in (nav.pos, nav.pitch, nav.roll, nav.yaw))
+    upd = np.arange(0, nav.yaw.size, 100)
+    nmap = Map(z=np.zeros((2, 2)), e0=0.0, n0=0.0, res_e=1.0, res_n=1.0)
+    tables = []
+    for _ in range(3):  # three methods' views of the same run
+        obs, _ = method_inputs(paper_run.obs, nmap)
+        tables.append(compute_increments(dt, obs.nav.pos, obs.nav.pitch, obs.nav.roll, obs.nav.yaw, upd.copy()))
+        tables[-1][:] = -1.0  # a method's copy is its own
+    assert len(calls) == 1
+    first = compute_increments(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    assert len(calls) == 1
+    writeable = [np.array(a) for a in (nav.pos, nav.pitch, nav.roll, nav.yaw)]
+    again = compute_increments(dt, *writeable, upd)
+    other_upd = compute_increments(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd[:-1])
+    other_dt = compute_increments(dt * 2, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    assert len(calls) == 4
+    assert first.tobytes() == again.tobytes() == other_upd.tobytes() + first[-1].tobytes()
+    assert other_dt.tobytes() != first.tobytes()
+    np.testing.assert_allclose(first, increments_numpy(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd),
+                               rtol=1e-12, atol=1e-9)
+
+
 def test_increments_zero_bias_is_a_rotation(synthetic_nav):
     """With zero biases a particle's displacement is Rz(delta) D0: the nav displacement rotated."""
     dt, pos, pitch, roll, yaw, vel = synthetic_nav

@@ -10,7 +10,7 @@ import pytest
 from tanbench import store
 from tanbench.runner.engine import SeriesWritten, series_table
 from tanbench.runner.tasks import TaskResult
-from tanbench.schema import SERIES_COLUMNS
+from tanbench.schema import SERIES_COLUMNS, rows_table
 
 
 def _result(k: int = 50, methods=("tight-dvl", "tight-sbe", "loose-dvl")) -> TaskResult:
@@ -111,3 +111,60 @@ def test_yardstick_is_timed_from_its_file_or_skipped(tmp_path):
     stick = tmp_path / "stick.py"
     stick.write_text("def measure(M=3000, steps=1190, seed=0):\n    return 1000.0 / M\n")
     assert yardstick_ns(stick, particles=500) == 2.0
+
+
+def _task_rows(run: int, extra: bool) -> list[dict]:
+    rows = []
+    for i, method in enumerate(("tight-dvl", "tight-sbe", "loose-dvl")):
+        row = {"sweep": "s", "noise_m": 1.0, "method": method, "run": run, "seed": 10 + run, "filter_seed": i,
+               "final_horizontal_error_m": float("nan") if i == 2 else 1.5 * run + i, "status": "ok",
+               "error": "", "wall_s": 0.25, "sensors.beam_azimuths_deg": [45.0, 135.0]}
+        if extra:  # a column outside the known ones (inferred): another schema
+            row["method_options.tight-dvl.k"] = 3
+        rows.append(row)
+    return rows
+
+
+def test_cells_merged_from_kept_rows_are_the_files_merged(tmp_path, monkeypatch):
+    """A cell's task files merged from the rows this session kept (compact_cells' ``kept``) give the
+    merged file that reading them back gives, byte for byte; a file not kept is read."""
+    meta = {"schema_version": store.SCHEMA_VERSION, store.CODE_META: {"user.mod:f": "1"}}
+    merged, reads = [], []
+    read_table = store.pq.read_table
+    monkeypatch.setattr(store.pq, "read_table", lambda path, *a, **k: reads.append(path) or read_table(path, *a, **k))
+    for name, keep in (("files", False), ("kept", True)):
+        out = tmp_path / name
+        written = SeriesWritten()
+        for run in range(5):
+            rows = _task_rows(run, extra=run in (2, 3))
+            path = store.run_file(out, "abc", run)
+            store.write_table(rows_table(rows), path, meta, **store.TASK_ROWS)
+            if keep and run != 4:
+                written.keep_rows(path, rows, meta)
+        reads.clear()
+        store.compact_cells(out, ["abc"], written.runs if keep else None)
+        assert len(reads) == (1 if keep else 5)
+        merged.append((store.cell_dir(out / "runs", "abc") / store.MERGED_RUNS).read_bytes())
+        assert not list(store.cell_dir(out / "runs", "abc").glob("run-*.parquet"))
+    assert merged[0] == merged[1]
+
+
+def test_kept_series_converted_together_are_the_files_read_back(tmp_path, monkeypatch):
+    """The series summary's frames: the session's tables converted together (results._series_frames)
+    give, concatenated, the frame of every file read back with its cell_id, row for row."""
+    from tanbench.results import _series_frames
+
+    monkeypatch.setattr(store, "read_meta", lambda path: {})
+    files, kept = [], SeriesWritten()
+    for i, (cell, methods) in enumerate([("a", ("tight-dvl", "loose-dvl")), ("a", ("tight-dvl", "loose-dvl")),
+                                         ("b", ("tight-sbe",)), ("b", ("tight-dvl", "loose-dvl"))]):
+        result = _result(k=20 + i, methods=methods)
+        table = series_table(result)
+        path = tmp_path / f"{cell}-run-{i:05d}.parquet"
+        store.write_table(table, path, {"schema": "x"}, **store.TASK_SERIES)
+        if i != 2:  # one file read back between kept ones
+            kept.keep(path, table)
+        files.append(((cell, path.name), path))
+    together = pd.concat(_series_frames(files, kept.tables), ignore_index=True)
+    read = pd.concat([store.read_parquet(p).assign(cell_id=c) for (c, _), p in files], ignore_index=True)
+    pd.testing.assert_frame_equal(together, read, check_exact=True)

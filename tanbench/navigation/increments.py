@@ -51,12 +51,17 @@ def interval_increments(dt, pos, pitch, roll, yaw, update_idx, out):
         sx = 0.0
         sz = 0.0
         axe = axn = aze = azn = 0.0
+        # a sample's sensitivities, computed once and carried to the next step (the same values)
+        cp = math.cos(pitch[k0])
+        rx1 = math.sin(roll[k0]) / cp
+        rz1 = math.cos(roll[k0]) / cp
         for i in range(k0, k1):
             # heading-rate sensitivities, trapezoid over the step; value at the step's middle
-            rx0 = math.sin(roll[i]) / math.cos(pitch[i])
-            rz0 = math.cos(roll[i]) / math.cos(pitch[i])
-            rx1 = math.sin(roll[i + 1]) / math.cos(pitch[i + 1])
-            rz1 = math.cos(roll[i + 1]) / math.cos(pitch[i + 1])
+            rx0 = rx1
+            rz0 = rz1
+            cp = math.cos(pitch[i + 1])
+            rx1 = math.sin(roll[i + 1]) / cp
+            rz1 = math.cos(roll[i + 1]) / cp
             mx = sx + 0.25 * dt * (rx0 + rx1)
             mz = sz + 0.25 * dt * (rz0 + rz1)
             de = pos[i + 1, 0] - pos[i, 0]
@@ -82,12 +87,59 @@ def interval_increments(dt, pos, pitch, roll, yaw, update_idx, out):
 
 
 def compute_increments(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:
-    """The (K, 12) increments table for the intervals between ``update_idx`` samples."""
+    """The (K, 12) increments table for the intervals between ``update_idx`` samples.
+
+    The methods of a run all ask for the same table (the run's navigation solution at the
+    same updates): when the four arrays cannot change (their memory read-only, as a simulated
+    run's navigation solution is), the last table computed is given again (a copy of it)
+    for the same memory, ``dt`` and updates instead of being computed again.
+    """
     update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
+    arrays = (pos, pitch, roll, yaw)
+    frozen = all(_frozen(a) for a in arrays)
+    if frozen:
+        last = _LAST[0]
+        if (last is not None and last[1] == dt and all(_same_memory(a, b) for a, b in zip(arrays, last[0]))
+                and np.array_equal(last[2], update_idx)):
+            return last[3].copy()
     out = np.empty((max(update_idx.size - 1, 0), N_INCREMENTS))
     interval_increments(dt, np.ascontiguousarray(pos), np.ascontiguousarray(pitch),
                         np.ascontiguousarray(roll), np.ascontiguousarray(yaw), update_idx, out)
+    if frozen:  # the arrays are kept: their memory cannot be freed and reused while remembered
+        _LAST[0] = (arrays, dt, update_idx.copy(), out.copy())
     return out
+
+
+# the last table computed from read-only arrays: (arrays, dt, update_idx, table)
+_LAST: list = [None]
+
+
+def _memory_owner(arr: np.ndarray) -> np.ndarray | None:
+    """The array owning ``arr``'s memory (through views and read-only memoryviews of arrays),
+    or None if it is not an array's (a buffer that could change behind a read-only view)."""
+    while True:
+        base = arr.base
+        if base is None:
+            return arr
+        if isinstance(base, memoryview):
+            base = base.obj
+        if not isinstance(base, np.ndarray):
+            return None
+        arr = base
+
+
+def _frozen(arr) -> bool:
+    """Whether ``arr``'s values cannot change: it and the array owning its memory are read-only."""
+    if not isinstance(arr, np.ndarray) or arr.flags.writeable:
+        return False
+    owner = _memory_owner(arr)
+    return owner is not None and not owner.flags.writeable
+
+
+def _same_memory(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two arrays read the same memory the same way (address, shape, strides, type)."""
+    return (a.__array_interface__["data"][0] == b.__array_interface__["data"][0] and a.shape == b.shape
+            and a.strides == b.strides and a.dtype == b.dtype)
 
 
 def increments_numpy(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:

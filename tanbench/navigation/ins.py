@@ -55,6 +55,8 @@ def strapdown(dt, streams, start, earth, window, compensate, out):
     fbuf = np.zeros((window, 3))
     ve_prev = 0.0
     vn_prev = 0.0
+    # the previous sample's attitude sines and cosines, carried over (the same values computed again before)
+    st_prev = ct_prev = sg_prev = cg_prev = sps_prev = cps_prev = 0.0
     for k in range(n):
         # --- levelling from the (compensated) specific force, moving average
         fx = accel[k, 0]
@@ -78,7 +80,8 @@ def strapdown(dt, streams, start, earth, window, compensate, out):
         g = _gravity(g0, r0, up)
         sp = min(1.0, max(-1.0, fsum[1] / count / g))
         th = math.asin(sp)
-        sr = min(1.0, max(-1.0, -fsum[0] / count / (g * math.cos(th))))
+        ct_k = math.cos(th)
+        sr = min(1.0, max(-1.0, -fsum[0] / count / (g * ct_k)))
         ga = math.asin(sr)
         pitch[k] = th
         roll[k] = ga
@@ -86,16 +89,14 @@ def strapdown(dt, streams, start, earth, window, compensate, out):
         if k == 0:
             yaw[k] = yaw_start
         else:
-            th0 = pitch[k - 1]
-            ga0 = roll[k - 1]
             ps0 = yaw[k - 1]
             up0 = pos[k - 1, 2]
             w_e = -vn_prev / (r_n + up0)
             w_n = wie_n + ve_prev / (r_e + up0)
             w_u = wie_u + ve_prev * tan_lat / (r_e + up0)
-            st, ct = math.sin(th0), math.cos(th0)
-            sg, cg = math.sin(ga0), math.cos(ga0)
-            sps, cps = math.sin(ps0), math.cos(ps0)
+            st, ct = st_prev, ct_prev  # of pitch[k - 1], roll[k - 1], yaw[k - 1]
+            sg, cg = sg_prev, cg_prev
+            sps, cps = sps_prev, cps_prev
             # omega_in^b = C_n^b omega_in^n = (C_b^n)^T omega_in^n: columns x and z of Eq. 5
             bx = (cg * cps - st * sg * sps) * w_e + (cg * sps + st * sg * cps) * w_n - ct * sg * w_u
             bz = (sg * cps + st * cg * sps) * w_e + (sg * sps - st * cg * cps) * w_n + ct * cg * w_u
@@ -103,9 +104,10 @@ def strapdown(dt, streams, start, earth, window, compensate, out):
             wz = gyro[k - 1, 2] - bz
             yaw[k] = ps0 + dt * (-sg * wx + cg * wz) / ct
         # --- dead reckoning with Eq. 5 applied to (vx, vy, 0)
-        st, ct = math.sin(pitch[k]), math.cos(pitch[k])
-        sg, cg = math.sin(roll[k]), math.cos(roll[k])
+        st, ct = math.sin(th), ct_k
+        sg, cg = math.sin(ga), math.cos(ga)
         sps, cps = math.sin(yaw[k]), math.cos(yaw[k])
+        st_prev, ct_prev, sg_prev, cg_prev, sps_prev, cps_prev = st, ct, sg, cg, sps, cps
         vx = vel_dvl[k, 0]
         vy = vel_dvl[k, 1]
         ve = (cg * cps - st * sg * sps) * vx - ct * sps * vy

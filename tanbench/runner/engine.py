@@ -127,18 +127,22 @@ def store_result(result: TaskResult, plan: Plan, state: ResumeState, columns: di
     if result.series:
         table = series_table(result)
         path = store.series_file(out, result.cell_id, result.run, full_series)
-        store.write_table(table, path, meta)
+        store.write_table(table, path, meta, **store.TASK_SERIES)
         if written is not None:
             written.keep(path, table)
     # a recomputed run leaves no older series of itself under the other --series mode
     store.series_file(out, result.cell_id, result.run, not full_series).unlink(missing_ok=True)
     rows = [{"sweep": plan.sweep.name, **columns[result.cell_id],
              **{k: v for k, v in row.items() if k != "cell_id"}} for row in result.rows]
-    store.write_table(rows_table(rows), store.run_file(out, result.cell_id, result.run), meta)
+    path = store.run_file(out, result.cell_id, result.run)
+    store.write_table(rows_table(rows), path, meta, **store.TASK_ROWS)
+    if written is not None:
+        written.keep_rows(path, rows, meta)
     return result
 
 
 SERIES_KEPT_MAX_BYTES = 256 * 2**20  # series frames a session keeps in memory for the summary
+RUN_VALUES_KEPT_MAX = 2_000_000  # run-row values a session keeps for merging its cells' files (~3,700 tasks of 3 methods)
 
 
 class SeriesWritten:
@@ -150,12 +154,24 @@ class SeriesWritten:
     def __init__(self, max_bytes: int = SERIES_KEPT_MAX_BYTES):
         self.tables: dict[Path, pa.Table] = {}
         self.room = max_bytes
+        self.runs: dict[Path, tuple[list[dict], dict]] = {}
+        self.run_values_room = RUN_VALUES_KEPT_MAX
 
     def keep(self, path: Path, table: pa.Table) -> None:
         self.tables.pop(path, None)
         if table.nbytes <= self.room:
             self.tables[path] = table
             self.room -= table.nbytes
+
+    def keep_rows(self, path: Path, rows: list[dict], meta: dict) -> None:
+        """Keep a task's run rows and file metadata as written, so that merging the cell's files
+        (:func:`tanbench.store.compact_cells`) builds its table from them instead of reading it back
+        (up to :data:`RUN_VALUES_KEPT_MAX` values)."""
+        self.runs.pop(path, None)
+        values = sum(len(row) for row in rows)
+        if values <= self.run_values_room:
+            self.runs[path] = (rows, json.loads(json.dumps(meta)))  # the metadata as the file reads it back
+            self.run_values_room -= values
 
 
 def _to_stderr(line: str) -> None:
@@ -195,7 +211,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     report.wall_s = time.perf_counter() - started
     log_session(out, report, plan, scheduler)
     if not report.interrupted:
-        store.compact_cells(out, [c.cell_id for c in sweep.cells])
+        store.compact_cells(out, [c.cell_id for c in sweep.cells], written.runs)
         report.tables = build_outputs(out, sweep, series, written.tables)
     return report
 
