@@ -746,12 +746,9 @@ def test_sin_cos_of_wound_angles_is_a_bounded_pseudo_random_direction():
 def test_sin_cos_near_and_the_exact_conversion_give_the_same_bits():
     """The loops take ``trig.sin_cos_near`` when ``wound_count`` finds no angle beyond WOUND: it is
     ``sin_cos`` bit for bit there; ``vecmath.exact_float_53`` is ``np.float64`` of an integer below
-    2^53, bit for bit (its numpy twin); the attitude matrices and the tight propagation give the same
-    bits whichever loop a block takes."""
+    2^53, bit for bit (its numpy twin)."""
     import numba as nb
 
-    from tanbench.filters import likelihood as lk
-    from tanbench.filters.propagate import _propagate_tight_any, propagate_tight
     from tanbench.filters.trig import WOUND, sin_cos_near, wound_count
     from tanbench.filters.vecmath import exact_float_53
 
@@ -777,18 +774,128 @@ def test_sin_cos_near_and_the_exact_conversion_give_the_same_bits():
     out = np.empty(v.size)
     exact_pass(v, out)
     assert np.array_equal(out, v.astype(np.float64))
-    m = 4000
-    x = rng.normal(0.0, 0.3, (8, m))
+
+
+def test_blocks_with_wound_angles_give_the_bits_of_sin_cos():
+    """A block with wound angles (beyond WOUND, NaN, infinite: a filter that lost its heading) runs
+    the near loops too: the attitude matrices and the Euler step on the offsets unwound
+    (``trig.unwound``), the tight propagation with the wound particles' horizontal step taken again.
+    Each equals, bit for bit, one loop of ``trig.sin_cos`` over every angle (the loops these replace,
+    :func:`_sin_cos_loops`), with wound angles in the block and without; ``unwound`` + ``sin_cos_near``
+    is ``sin_cos`` for any double."""
+    from tanbench.filters import likelihood as lk
+    from tanbench.filters.trig import WOUND, sin_cos_near, unwound
+
+    rng = np.random.default_rng([KERNEL_SEED, 84])
+    d = np.concatenate([rng.uniform(-40.0, 40.0, 2000), np.logspace(5.0, 300.0, 4000),
+                        -np.logspace(5.0, 300.0, 4000), [WOUND, -WOUND, np.nextafter(WOUND, np.inf), 0.0, -0.0],
+                        [np.nan, np.inf, -np.inf]])
+    s, c = np.empty_like(d), np.empty_like(d)
+    trig_pass(d, s, c)
+    near = np.array([sin_cos_near(unwound(v)) for v in d])
+    assert np.array_equal(near[:, 0], s, equal_nan=True) and np.array_equal(near[:, 1], c, equal_nan=True)
+    attitude_ref, propagate_ref, euler_ref = _sin_cos_loops()
+    m, lo, n = 4000, 1000, 2500
     att = attitude_reference(0.01, -0.02, 0.5)
-    dcm, dcm_any = np.empty((9, m)), np.empty((9, m))
-    lk.attitude_matrices(x, 0, att, dcm)
-    lk._attitude_rows(x[PITCH], x[ROLL], x[YAW], att, dcm_any)
-    assert np.array_equal(dcm, dcm_any)
-    inc, noise = rng.normal(0.0, 1.0, 12), rng.standard_normal((6, m))
-    x1, x2, dist1, dist2 = x.copy(), x.copy(), np.zeros((2, m)), np.zeros((2, m))
-    propagate_tight(x1, inc, 0.3, noise, 0.1, 0.01, 1e-3, 2, dist1, 0.2)
-    _propagate_tight_any(x2, inc, 0.3, noise, 0.1, 0.01, 1e-3, 2, dist2, 0.2, 0)
-    assert np.array_equal(x1, x2) and np.array_equal(dist1, dist2)
+    inc, noise, u = rng.normal(0.0, 1.0, 12), rng.standard_normal((6, n)), rng.normal(0.0, 1.0, 4)
+    for wound in (False, True):
+        x = rng.normal(0.0, 0.3, (8, m))
+        if wound:  # wound headings (and, to cover every row, pitches and rolls)
+            picks = rng.choice(np.arange(lo, lo + n), 60, replace=False)
+            x[YAW, picks[:40]] = rng.choice([-1.0, 1.0], 40) * np.logspace(5.01, 17, 40)
+            x[YAW, picks[40:43]] = [np.nan, np.inf, -np.inf]
+            x[PITCH, picks[43:50]] = -3e6
+            x[ROLL, picks[50:]] = 2e9
+        blk = slice(lo, lo + n)
+        dcm, dcm_ref = np.empty((9, n)), np.empty((9, n))
+        lk.attitude_matrices(x, lo, att, dcm)
+        attitude_ref(x[PITCH, blk].copy(), x[ROLL, blk].copy(), x[YAW, blk].copy(), att, dcm_ref)
+        assert np.array_equal(dcm, dcm_ref, equal_nan=True)
+        for move, ref, args in ((prop.propagate_tight, propagate_ref, (inc, 0.3, noise, 0.1, 0.01, 1e-3, 2)),
+                                (prop.propagate_tight_euler, euler_ref, (u, 1.0, inc, noise, 0.1, 0.01, 1e-3, 2))):
+            x1, x2, dist1, dist2 = x.copy(), x.copy(), np.zeros((2, n)), np.zeros((2, n))
+            if move is prop.propagate_tight:
+                move(x1, *args, dist1, 0.2, lo)
+                ref(x2, *args, dist2, 0.2, lo)
+            else:
+                move(x1, *args, dist1, att, lo)
+                ref(x2, *args, dist2, att, lo)
+            assert np.array_equal(x1, x2, equal_nan=True) and np.array_equal(dist1, dist2, equal_nan=True)
+            assert np.isnan(x1).any() == wound
+    for yaw in (0.3, -2e6, 5e15, np.nan):  # the loose loops' corrected navigation: one particle, no noise
+        one = rng.normal(0.0, 1.0, (8, 1))
+        one[YAW, 0] = yaw
+        two = one.copy()
+        prop.dead_reckon(one, inc, 0.25)
+        propagate_ref(two, inc, 0.25, np.zeros((6, 1)), 0.0, 0.0, 0.0, prop.DIST_NONE, np.zeros((2, 1)), 0.0, 0)
+        assert np.array_equal(one, two, equal_nan=True)
+
+
+def _sin_cos_loops():
+    """The attitude matrices, the tight propagation and its Euler step as single loops of
+    ``trig.sin_cos`` (the same arithmetic and fastmath flags as the kernels; the references of
+    the wound blocks' paths)."""
+    import numba as nb
+
+    from tanbench.fastmath import FASTMATH
+    from tanbench.filters.trig import sin_cos
+
+    @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+    def about(s_ref, c_ref, d):
+        s, c = sin_cos(d)
+        return s_ref * c + c_ref * s, c_ref * c - s_ref * s
+
+    @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+    def angles(pitch, roll, yaw, att):
+        st, ct = about(att[1], att[2], pitch - att[0])
+        sg, cg = about(att[4], att[5], roll - att[3])
+        sp, cp = about(att[7], att[8], yaw - att[6])
+        return st, ct, sg, cg, sp, cp
+
+    @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+    def attitude_ref(pitch, roll, yaw, att, dcm):
+        for j in range(dcm.shape[1]):
+            st, ct, sg, cg, sp, cp = angles(pitch[j], roll[j], yaw[j], att)
+            dcm[0, j], dcm[1, j], dcm[2, j] = cg * cp - st * sg * sp, -ct * sp, sg * cp + st * cg * sp
+            dcm[3, j], dcm[4, j], dcm[5, j] = cg * sp + st * sg * cp, ct * cp, sg * sp - st * cg * cp
+            dcm[6, j], dcm[7, j], dcm[8, j] = -ct * sg, st, ct * cg
+
+    @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+    def move(x, j, noise, dist, k, de, dn, dyaw, inc, sig_up, sig_att, dist_mode):
+        x[E, j] += de
+        x[N, j] += dn
+        x[U, j] += inc[incmod.DUP] + sig_up * noise[2, k]
+        x[PITCH, j] += inc[incmod.DPITCH] + sig_att * noise[3, k]
+        x[ROLL, j] += inc[incmod.DROLL] + sig_att * noise[4, k]
+        x[YAW, j] += dyaw + sig_att * noise[5, k]
+        if dist_mode == prop.DIST_NAVIGATION:
+            dist[0, k] = inc[incmod.D0E] - de
+            dist[1, k] = inc[incmod.D0N] - dn
+
+    @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+    def propagate_ref(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist, yaw_off, lo):
+        s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
+        for k in range(noise.shape[1]):
+            j = lo + k
+            bx, bz = x[BX, j], x[BZ, j]
+            s, c = about(s_off, c_off, (x[YAW, j] - yaw_nav0) - yaw_off)
+            ue = inc[incmod.D0E] + bx * inc[incmod.JAXE] - bz * inc[incmod.JAZE]
+            un = inc[incmod.D0N] + bx * inc[incmod.JAXN] - bz * inc[incmod.JAZN]
+            move(x, j, noise, dist, k, c * ue - s * un + sig_pos * noise[0, k], s * ue + c * un + sig_pos * noise[1, k],
+                 inc[incmod.DYAW] + bx * inc[incmod.SX] - bz * inc[incmod.SZ], inc, sig_up, sig_att, dist_mode)
+
+    @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+    def euler_ref(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist, att, lo):
+        vx, vy, wx, wz = u[incmod.EU_VX] * dt, u[incmod.EU_VY] * dt, u[incmod.EU_WX], u[incmod.EU_WZ]
+        for k in range(noise.shape[1]):
+            j = lo + k
+            st, ct, sg, cg, sp, cp = angles(x[PITCH, j], x[ROLL, j], x[YAW, j], att)
+            de = (cg * cp - st * sg * sp) * vx - ct * sp * vy + sig_pos * noise[0, k]
+            dn = (cg * sp + st * sg * cp) * vx + ct * cp * vy + sig_pos * noise[1, k]
+            yaw_rate = (-sg * (wx - x[BX, j]) + cg * (wz - x[BZ, j])) / ct
+            move(x, j, noise, dist, k, de, dn, yaw_rate * dt, inc, sig_up, sig_att, dist_mode)
+
+    return attitude_ref, propagate_ref, euler_ref
 
 
 def _trig_pass():

@@ -71,12 +71,12 @@ def test_compile_groups_split_whole_families_longest_first(tmp_path, monkeypatch
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     methods = ("tight-dvl", "tight-sbe", "loose-dvl", "my.module:run")
     assert planning.compile_groups(methods, 1) == [["tight-dvl", "tight-sbe", "loose-dvl"]]
-    # loose-dvl alone (55.7 s: it compiles the propagation and likelihood passes it shares with tight) is
+    # loose-dvl alone (45.0 s: it compiles the likelihood, resampling and random-number passes it shares with tight) is
     # the longer group, the parent's
     assert planning.compile_groups(methods, 2) == [["loose-dvl"], ["tight-dvl", "tight-sbe"]]
     assert planning.compile_groups(methods, 8) == [["loose-dvl"], ["tight-dvl", "tight-sbe"]]
-    five = ("tight-dvl", "loose-dvl", "pmf-dvl", "mpf-dvl", "ekf-dvl")  # 54, 27.4 (55.7 alone), 13.5, 8.4, 7.5 s
-    groups = planning.compile_groups(five, 2)  # loose alone 55.7 + 8.4 + 7.5 = 71.6 s against 54 + 13.5 = 67.5 s
+    five = ("tight-dvl", "loose-dvl", "pmf-dvl", "mpf-dvl", "ekf-dvl")  # 41.6, 23.5 (45.0 alone), 13.5, 7.5, 8.4 s
+    groups = planning.compile_groups(five, 2)  # loose alone 45.0 + 8.4 + 7.5 = 60.9 s against 41.6 + 13.5 = 55.1 s
     assert groups == [["loose-dvl", "ekf-dvl", "mpf-dvl"], ["tight-dvl", "pmf-dvl"]]
     assert planning.compile_groups(methods, 2, cold=[]) == []
     assert planning.compile_seconds(methods, cold=[], processes=2) == 0.0

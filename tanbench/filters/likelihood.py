@@ -39,7 +39,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import attitude_sin_cos, attitude_wound
+from tanbench.filters.trig import attitude_sin_cos, attitude_wound, unwound_attitude
 from tanbench.filters.vecmath import log_positive
 from tanbench.options import LIKELIHOOD
 from tanbench.terrain.grid import bilinear_numpy, interpolate_cells, locate_cell, node_grid
@@ -170,27 +170,18 @@ def attitude_matrices(x, lo, att, dcm):
     pitch, roll, yaw = x[PITCH, lo:lo + n], x[ROLL, lo:lo + n], x[YAW, lo:lo + n]
     if attitude_wound(pitch, roll, yaw, att) == 0:  # the same bits without the wound angles' hash
         _attitude_rows_near(pitch, roll, yaw, att, dcm)
-    else:
-        _attitude_rows(pitch, roll, yaw, att, dcm)
+    else:  # wound angles (rare): the same loop on their offsets, unwound (the same bits as trig.sin_cos)
+        p, r, y, att0 = unwound_attitude(pitch, roll, yaw, att)
+        _attitude_rows_near(p, r, y, att0, dcm)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _attitude_rows_near(pitch, roll, yaw, att, dcm):
-    """:func:`_attitude_rows` of offsets all within ``trig.WOUND`` (``trig.sin_cos_near``)."""
-    _attitude_loop(pitch, roll, yaw, att, dcm, True)
-
-
-@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def _attitude_rows(pitch, roll, yaw, att, dcm):
-    """:func:`attitude_matrices` of the rows ``pitch``, ``roll``, ``yaw``."""
-    _attitude_loop(pitch, roll, yaw, att, dcm, False)
-
-
-@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _attitude_loop(pitch, roll, yaw, att, dcm, near):
+    """C_b^n of the rows ``pitch``, ``roll``, ``yaw`` into ``dcm``: offsets all within ``trig.WOUND``
+    (``trig.sin_cos_near``)."""
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
     for j in range(dcm.shape[1]):
-        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att, near)
+        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att)
         c00[j] = cg * cp - st * sg * sp
         c01[j] = -ct * sp
         c02[j] = sg * cp + st * cg * sp

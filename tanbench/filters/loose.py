@@ -29,7 +29,7 @@ from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, Likelihood, beam_constants, loglik_loose_pass, new_likelihood_work, used_offsets,
                                         work_block)
-from tanbench.filters.propagate import DIST_NONE, propagate_loose, propagate_tight
+from tanbench.filters.propagate import dead_reckon, propagate_loose
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
@@ -275,8 +275,6 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
     zt = np.empty(2)
     _open_window(m_prior, p_prior, out_en[0, 0], out_en[0, 1], half_side)
     nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
-    zero_noise = np.zeros((6, 1))
-    dist = np.zeros((2, 1))
     bufs = LooseBuffers(np.empty(3 * min(BLOCK, m)), new_likelihood_work(min(BLOCK, m), 4 * grid.grids), ll)
     consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
     nav[E, 0] = out_en[0, 0]
@@ -302,7 +300,7 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
             b_e = -(c * inc[k - 1, JAZE] - s * inc[k - 1, JAZN])
             b_n = -(s * inc[k - 1, JAZE] + c * inc[k - 1, JAZN])
             nav[U, 0] = nav_up[k - 1]
-            propagate_tight(nav, inc[k - 1], nav_yaw[k - 1], zero_noise, 0.0, 0.0, 0.0, DIST_NONE, dist)
+            dead_reckon(nav, inc[k - 1], nav_yaw[k - 1])
             d_e = nav[E, 0] - e_before
             d_n = nav[N, 0] - n_before
             sig_heading = math.sqrt(p_kf[EPSI, EPSI])

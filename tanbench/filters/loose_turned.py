@@ -44,7 +44,7 @@ from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
                                         work_block)
 from tanbench.filters.loose import position_reset, record_kalman_update, reopen_kf
-from tanbench.filters.propagate import DIST_NONE, propagate_tight
+from tanbench.filters.propagate import dead_reckon
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
@@ -195,8 +195,6 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     p_prior = np.empty((2, 2))
     zt = np.empty(2)
     nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
-    zero_noise = np.zeros((6, 1))
-    dist = np.zeros((2, 1))
     dist_block = np.zeros((2, block))
     noise_buf = np.empty(3 * block)
     work = new_likelihood_work(block, 4 * grid.grids)
@@ -228,7 +226,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
             b_e = -(c * inc[k - 1, JAZE] - s * inc[k - 1, JAZN])
             b_n = -(s * inc[k - 1, JAZE] + c * inc[k - 1, JAZN])
             nav[U, 0] = nav_up[k - 1]
-            propagate_tight(nav, inc[k - 1], nav_yaw[k - 1], zero_noise, 0.0, 0.0, 0.0, DIST_NONE, dist)
+            dead_reckon(nav, inc[k - 1], nav_yaw[k - 1])
             d_e = nav[E, 0] - e_before
             d_n = nav[N, 0] - n_before
             dyaw = nav[YAW, 0] - yaw_before

@@ -34,7 +34,8 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
-from tanbench.filters.trig import LEVEL, attitude_sin_cos, sin_cos_about, wound_count
+from tanbench.filters.trig import (LEVEL, WOUND, attitude_sin_cos, attitude_wound, sin_cos_about, unwound,
+                                   unwound_attitude, wound_count)
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, EU_VX, EU_VY, EU_WX, EU_WZ,
                                             JAXE, JAXN, JAZE, JAZN, SX, SZ)
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -111,31 +112,20 @@ def propagate_tight(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode
     ``dist_innov``): the filter loops run their particle passes over blocks of the cloud.
     """
     n = noise.shape[1]
-    if wound_count(x[YAW, lo:lo + n], yaw_nav0, yaw_off) == 0:  # the same bits without the wound angles' hash
+    wound = wound_count(x[YAW, lo:lo + n], yaw_nav0, yaw_off)
+    if wound == 0:  # the same bits as trig.sin_cos, without the wound angles' hash
         _propagate_tight_near(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo)
     else:
-        _propagate_tight_any(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo)
+        _propagate_tight_wound(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo,
+                               wound)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _propagate_tight_near(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo):
     """:func:`propagate_tight` of heading offsets all within ``trig.WOUND`` (``trig.sin_cos_near``)."""
-    _propagate_tight_loop(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo, True)
-
-
-@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def _propagate_tight_any(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo):
-    _propagate_tight_loop(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo,
-                          False)
-
-
-@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _propagate_tight_loop(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo,
-                          near):
     s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
     shared = shared_motion(inc, sig_up, sig_att, dist_mode)
-    d0e, d0n = shared.d0e, shared.d0n
-    jaxe, jaxn, jaze, jazn = inc[JAXE], inc[JAXN], inc[JAZE], inc[JAZN]
+    lever = _lever(inc)
     dyaw, sx, sz = inc[DYAW], inc[SX], inc[SZ]
     rows, nz, dist = _block_views(x, lo, noise, dist_innov)
     e, nn, u, pitch, roll, yaw, bxs, bzs = rows
@@ -143,12 +133,73 @@ def _propagate_tight_loop(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dis
     for j in range(noise.shape[1]):
         bx = bxs[j]
         bz = bzs[j]
-        s, c = sin_cos_about(s_off, c_off, (yaw[j] - yaw_nav0) - yaw_off, near)
-        ue = d0e + bx * jaxe - bz * jaze
-        un = d0n + bx * jaxn - bz * jazn
-        de = c * ue - s * un + sig_pos * n_e[j]
-        dn = s * ue + c * un + sig_pos * n_n[j]
+        de, dn = _displacement(s_off, c_off, (yaw[j] - yaw_nav0) - yaw_off, bx, bz, lever, sig_pos, n_e[j], n_n[j])
         _move_particle(rows, nz, dist, j, de, dn, dyaw + bx * sx - bz * sz, shared)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _propagate_tight_wound(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo,
+                           wound):
+    """:func:`propagate_tight` of a block with ``wound`` heading offsets beyond ``trig.WOUND`` (or NaN;
+    only a filter that lost its heading has them): every particle moves in the near loop, then the
+    wound ones' horizontal step, the one part of the motion their heading's sine and cosine enter,
+    is taken again from where they started, with the offset unwound (``trig.unwound``: the bits of
+    ``trig.sin_cos``). No second SIMD loop to compile."""
+    rows, nz, dist = _block_views(x, lo, noise, dist_innov)
+    e, nn, yaw, bxs, bzs = rows[0], rows[1], rows[5], rows[6], rows[7]
+    which = np.empty(wound, dtype=np.int64)
+    start = np.empty((3, wound))  # east, north, yaw before the move
+    i = 0
+    for j in range(noise.shape[1]):
+        if not abs((yaw[j] - yaw_nav0) - yaw_off) <= WOUND:
+            which[i] = j
+            start[0, i], start[1, i], start[2, i] = e[j], nn[j], yaw[j]
+            i += 1
+    _propagate_tight_near(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo)
+    s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
+    shared = shared_motion(inc, sig_up, sig_att, dist_mode)
+    for i in range(wound):
+        j = which[i]
+        de, dn = _displacement(s_off, c_off, unwound((start[2, i] - yaw_nav0) - yaw_off), bxs[j], bzs[j], _lever(inc),
+                               sig_pos, nz[0][j], nz[1][j])
+        e[j] = start[0, i] + de
+        nn[j] = start[1, i] + dn
+        if shared.navigation:  # as _move_particle
+            dist[0][j] = shared.d0e - de
+            dist[1][j] = shared.d0n - dn
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def dead_reckon(x, inc, yaw_nav0):
+    """:func:`propagate_tight` of one particle (``x`` (8, 1)) without noise or distance
+    innovations (``DIST_NONE``): the loose loops' corrected navigation, with the same bits, compiled
+    without the SIMD pass and its wound-angle twin (the offset unwound, ``trig.unwound``)."""
+    zero = np.zeros((6, 1))
+    rows, nz, dist = _block_views(x, 0, zero, zero[:2])
+    bx, bz = rows[6][0], rows[7][0]
+    de, dn = _displacement(0.0, 1.0, unwound(rows[5][0] - yaw_nav0), bx, bz, _lever(inc), 0.0, nz[0][0], nz[1][0])
+    _move_particle(rows, nz, dist, 0, de, dn, inc[DYAW] + bx * inc[SX] - bz * inc[SZ],
+                   shared_motion(inc, 0.0, 0.0, DIST_NONE))
+
+
+@nb.njit(cache=True, inline="always")
+def _lever(inc):
+    """The navigation displacement and its gyro-bias lever terms of one increments row:
+    (d0e, d0n, jaxe, jaxn, jaze, jazn) (``navigation.increments``)."""
+    return inc[D0E], inc[D0N], inc[JAXE], inc[JAXN], inc[JAZE], inc[JAZN]
+
+
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _displacement(s_off, c_off, d, bx, bz, lever, sig_pos, n_e, n_n):
+    """A particle's east/north step: the navigation displacement (``lever``, :func:`_lever`)
+    corrected for its gyro biases ``bx``, ``bz``, rotated by its heading offset ``d`` (within
+    ``trig.WOUND``) about the reference whose sine and cosine are ``s_off``, ``c_off``
+    (``trig.sin_cos_about``), plus ``sig_pos`` times its noise ``n_e``, ``n_n``."""
+    d0e, d0n, jaxe, jaxn, jaze, jazn = lever
+    s, c = sin_cos_about(s_off, c_off, d)
+    ue = d0e + bx * jaxe - bz * jaze
+    un = d0n + bx * jaxn - bz * jazn
+    return c * ue - s * un + sig_pos * n_e, s * ue + c * un + sig_pos * n_n
 
 
 def propagate_tight_numpy(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode):
@@ -190,13 +241,27 @@ def propagate_tight_euler(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_m
     the interval start, or the cloud's; it does not change the motion. Particles
     ``lo .. lo + n - 1`` move, as in :func:`propagate_tight`.
     """
+    n = noise.shape[1]
+    pitch, roll, yaw = x[PITCH, lo:lo + n], x[ROLL, lo:lo + n], x[YAW, lo:lo + n]
+    if attitude_wound(pitch, roll, yaw, att) == 0:  # the trigonometry's offsets from the state rows
+        _euler_loop(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, (pitch, roll, yaw, att), lo)
+    else:  # wound angles (rare): from their offsets, unwound (the bits of trig.sin_cos)
+        _euler_loop(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov,
+                    unwound_attitude(pitch, roll, yaw, att), lo)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _euler_loop(x, u, dt, inc, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, angles, lo):
+    """:func:`propagate_tight_euler`'s pass; the particles' sines and cosines from ``angles`` =
+    (pitch, roll, yaw rows, reference), as ``trig.attitude_sin_cos`` takes them."""
+    p, r, y, att = angles
     vx, vy, wx, wz = u[EU_VX] * dt, u[EU_VY] * dt, u[EU_WX], u[EU_WZ]
     shared = shared_motion(inc, sig_up, sig_att, dist_mode)
     rows, nz, dist = _block_views(x, lo, noise, dist_innov)
     e, nn, u, pitch, roll, yaw, bxs, bzs = rows
     n_e, n_n = nz[0], nz[1]
     for j in range(noise.shape[1]):
-        st, ct, sg, cg, sp, cp = attitude_sin_cos(pitch[j], roll[j], yaw[j], att, False)
+        st, ct, sg, cg, sp, cp = attitude_sin_cos(p[j], r[j], y[j], att)
         de = (cg * cp - st * sg * sp) * vx - ct * sp * vy + sig_pos * n_e[j]
         dn = (cg * sp + st * sg * cp) * vx + ct * cp * vy + sig_pos * n_n[j]
         yaw_rate = (-sg * (wx - bxs[j]) + cg * (wz - bzs[j])) / ct

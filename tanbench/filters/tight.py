@@ -189,7 +189,6 @@ def draw_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior, half_sid
     _shift_scale(x[BZ], 0.0, prior.std_bias)
 
 
-@nb.njit(cache=True)
 def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     """Run the filter over all updates; fill the :class:`TightOutputs` ``out``.
 
@@ -211,8 +210,26 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     start plus ``yaw_off``, the cloud's heading offset from the navigation at the last update
     (and, for the Euler step, about the navigation pitch and roll there); the beams about the
     navigation attitude with its yaw moved by the same offset.
+
+    The jitted loop (:func:`_tight_loop`) takes the two options of the paper-as-written readings
+    and of the shared regularisation as arguments that are None under the defaults: numba compiles
+    every branch of a jitted body and prunes only the ones an argument's type (None) decides, so a
+    run with the defaults (the exact increments, the posterior-sized kernel) compiles neither the
+    Euler step nor the shared resampling kernel (docs/speed.md, "Compiling less"); a run that sets
+    either compiles the loop once more, with both.
     """
-    inc, nav_yaw, nav_pitch, nav_roll, nav_up, euler_in = track
+    euler_in = track.euler_in if settings.readings.propagation != 0 else None
+    shared_rs = settings.rs if settings.rs.kind != REG_POSTERIOR else None
+    _tight_loop(x, rng, track, ranges, beams, grid, settings, out, euler_in, shared_rs)
+
+
+@nb.njit(cache=True)
+def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, euler_in, shared_rs):
+    """:func:`tight_filter_loop`, with ``euler_in`` the Euler-step inputs (``track.euler_in``) if
+    ``readings.propagation`` asks for the Euler step, else None (the exact increments), and
+    ``shared_rs`` the Resampling bundle if the shared kernel regularises
+    (``resample.resample_and_regularise``), else None (the posterior-sized kernel)."""
+    inc, nav_yaw, nav_pitch, nav_roll, nav_up, _ = track
     model, rs, div, prior, readings, lik, guard = settings
     est, var, cov_en_out, ess_out, reinit_out, healthy_out = out
     m = x.shape[1]
@@ -256,7 +273,7 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
                 noise_all = noise_buf[:noise_rows * n].reshape((noise_rows, n))
                 fill_normals(rng, noise_all)
                 noise = noise_all[:6]
-                if readings.propagation != 0:
+                if euler_in is not None:
                     propagate_tight_euler(x, euler_in[k - 1], readings.dt, inc[k - 1], noise, model.sig_pos,
                                           model.sig_up, model.sig_att, model.dist_mode, dist,
                                           attitude_reference(nav_pitch[k - 1], nav_roll[k - 1],
@@ -309,10 +326,10 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
             yaw_off = 0.0  # the new cloud is drawn about the navigation heading
             reinit_out[k] = 1
             continue
-        if rs.kind == REG_POSTERIOR:
+        if shared_rs is None:
             resample_posterior(x, w, logw, ess, rng, rs, YAW, mean[YAW], spread, uni, idx, scratch)
         else:
-            resample_and_regularise(x, w, logw, ess, rng, rs, N_TIGHT, spread, uni, idx, scratch)
+            resample_and_regularise(x, w, logw, ess, rng, shared_rs, N_TIGHT, spread, uni, idx, scratch)
 
 
 @nb.njit(cache=True)

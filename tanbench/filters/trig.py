@@ -98,10 +98,13 @@ def _sin_cos_reduced(d, nonfinite):
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def sin_cos_about(s_ref, c_ref, d, near=False):
-    """(sin(ref + d), cos(ref + d)) from sin/cos of the reference angle; ``near`` (a constant)
-    takes :func:`sin_cos_near` for an offset known to be within ``WOUND``."""
-    s, c = sin_cos_near(d) if near else sin_cos(d)
+def sin_cos_about(s_ref, c_ref, d):
+    """(sin(ref + d), cos(ref + d)) from sin/cos of the reference angle, for an offset ``d`` within
+    ``WOUND`` (:func:`sin_cos_near`; a loop whose block has wound offsets unwinds them first,
+    :func:`unwound`, which gives :func:`sin_cos`'s bits). Only the near form is compiled into the
+    loops: numba inlines an ``inline="always"`` function by copying its IR, both branches of a
+    choice included, at every call site."""
+    s, c = sin_cos_near(d)
     return s_ref * c + c_ref * s, c_ref * c - s_ref * s
 
 
@@ -117,13 +120,14 @@ LEVEL = (0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0)
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def attitude_sin_cos(pitch, roll, yaw, att, near=False):
+def attitude_sin_cos(pitch, roll, yaw, att):
     """(sin, cos) of a particle's pitch, roll and yaw, each as the reference ``att``
-    (:func:`attitude_reference`) plus an offset (``near`` as in :func:`sin_cos_about`)."""
+    (:func:`attitude_reference`) plus an offset within ``WOUND`` (:func:`sin_cos_about`; rows with
+    wound offsets go through :func:`unwound_attitude` first)."""
     ref_pitch, s_pitch, c_pitch, ref_roll, s_roll, c_roll, ref_yaw, s_yaw, c_yaw = att
-    st, ct = sin_cos_about(s_pitch, c_pitch, pitch - ref_pitch, near)
-    sg, cg = sin_cos_about(s_roll, c_roll, roll - ref_roll, near)
-    sp, cp = sin_cos_about(s_yaw, c_yaw, yaw - ref_yaw, near)
+    st, ct = sin_cos_about(s_pitch, c_pitch, pitch - ref_pitch)
+    sg, cg = sin_cos_about(s_roll, c_roll, roll - ref_roll)
+    sp, cp = sin_cos_about(s_yaw, c_yaw, yaw - ref_yaw)
     return st, ct, sg, cg, sp, cp
 
 
@@ -132,3 +136,33 @@ def attitude_wound(pitch, roll, yaw, att):
     """How many of the attitude offsets of rows ``pitch``, ``roll``, ``yaw`` from ``att`` are
     beyond ``WOUND`` (:func:`wound_count`): 0 lets a loop take :func:`sin_cos_near`."""
     return wound_count(pitch, att[0], 0.0) + wound_count(roll, att[3], 0.0) + wound_count(yaw, att[6], 0.0)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def unwound(d):
+    """``d``, or, for a finite ``d`` beyond ``WOUND``, the angle :func:`sin_cos` takes for it
+    (:func:`wound_angle`): ``sin_cos_near(unwound(d))`` is ``sin_cos(d)`` bit for bit (NaN and
+    infinities stay, and give NaN)."""
+    return wound_angle(d) if abs(d) > WOUND and d - d == 0.0 else d
+
+
+@nb.njit(cache=True, error_model="numpy")
+def unwound_offsets(row, ref, out):
+    """``out[j] = unwound(row[j] - ref)`` (:func:`unwound`)."""
+    for j in range(row.shape[0]):
+        out[j] = unwound(row[j] - ref)
+
+
+@nb.njit(cache=True)
+def unwound_attitude(pitch, roll, yaw, att):
+    """The rows ``pitch``, ``roll``, ``yaw`` as offsets from the reference ``att``, unwound
+    (:func:`unwound_offsets`), and ``att`` with its angles zero and its sines and cosines kept:
+    ``attitude_sin_cos(p[j], r[j], y[j], att0)`` is then :func:`sin_cos` of each offset from
+    ``att``, rotated, bit for bit, wound angles included. A block with wound angles (rare: a filter
+    that lost its heading) thus runs the same loop as the others."""
+    n = pitch.shape[0]
+    p, r, y = np.empty(n), np.empty(n), np.empty(n)
+    unwound_offsets(pitch, att[0], p)
+    unwound_offsets(roll, att[3], r)
+    unwound_offsets(yaw, att[6], y)
+    return p, r, y, (0.0, att[1], att[2], 0.0, att[4], att[5], 0.0, att[7], att[8])

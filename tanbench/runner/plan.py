@@ -25,19 +25,23 @@ SERIES_MODES = ("none", "summary", "full")
 # them by the share of a core each process gets at the current load average.
 # (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
 SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
-# numba compiling a sweep's kernels on a cold on-disk cache: thread CPU seconds, measured one method
-# after another in this order in one process on the 2-core dev machine (3 Dec 2026, the kernels after
-# issue 27's compile cuts; docs/speed.md "Compiling less"): the run's simulation (strapdown navigation,
-# IMU errors), then each method family's kernels (a family: the methods named FAMILY-sensor, which run
-# the same kernels with the same types; the first, tight, includes the random numbers, resampling,
-# propagation and likelihood passes the later ones reuse). A sweep compiles only the families it names.
-# pmf, mpf, ekf and tercom: measured 2 Dec 2026 (after issue 26's wiring), not since.
+# numba compiling a sweep's kernels on a cold on-disk cache: thread CPU seconds, one method after another
+# in this order in one process on the 2-core dev machine: the run's simulation (strapdown navigation, IMU
+# errors), then each method family's kernels (a family: the methods named FAMILY-sensor, which run the same
+# kernels with the same types; the first, tight, includes the random numbers, resampling, propagation and
+# likelihood passes the later ones reuse). A sweep compiles only the families it names.
+# tight and loose: the values measured after issue 27's first compile cuts (3 Dec 2026, load 1.7-6:
+# tight 54.0, loose after it 27.4, loose alone 55.7) times the ratio new/old of cold compiles of the code
+# before and after the rare variants were made lazy, old and new compiled side by side on a loaded machine
+# (3 Dec 2026, docs/speed.md "3 December, fifth session"): tight 0.77 (2 pairs: 0.768, 0.778), loose after
+# tight 0.86 (0.829, 0.883), loose alone 0.81 (1 pair). pmf, mpf, ekf and tercom: measured 2 Dec 2026 (after
+# issue 26's wiring), not since.
 COMPILE_SHARED_S = 5.4
-COMPILE_FAMILY_S = {"tight": 54.0, "loose": 27.4, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
+COMPILE_FAMILY_S = {"tight": 41.6, "loose": 23.5, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
 # a family compiled in a process without the family whose kernels it reuses (a side-by-side helper):
-# loose-dvl after the simulation only, on a fresh cache (same day and code)
+# loose-dvl after the simulation only, on a fresh cache
 COMPILE_REUSES = {"loose": "tight"}
-COMPILE_ALONE_S = {"loose": 55.7}
+COMPILE_ALONE_S = {"loose": 45.0}
 COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
 # a helper process starting (spawn, imports: 1.5-1.6 s CPU) and the parent loading the kernels it
 # compiled afterwards (0.1 s), measured 3 Dec 2026
