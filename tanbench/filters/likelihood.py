@@ -194,10 +194,12 @@ def _attitude_rows_near(pitch, roll, yaw, att, dcm):
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _footprint(e, nn, u, c00, c01, c02, c10, c11, c12, c20, c21, c22, a0, a1, a2, grid):
-    """The footprint of beam ``(a0, a1, a2)`` from (e, nn, u) with attitude matrix c: its map
-    cell, position in the cell and height (cell, tx, ty, pu)."""
+def _footprint(e, nn, u, c, a, grid):
+    """The footprint of beam ``a`` (a0, a1, a2) from (e, nn, u) with attitude matrix ``c`` (its nine
+    elements row by row): its map cell, position in the cell and height (cell, tx, ty, pu)."""
     _, _, e0, n0, inv_re, inv_rn, nx, ny = grid
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = c
+    a0, a1, a2 = a
     pe = e + c00 * a0 + c01 * a1 + c02 * a2
     pn = nn + c10 * a0 + c11 * a1 + c12 * a2
     pu = u + c20 * a0 + c21 * a1 + c22 * a2
@@ -214,8 +216,8 @@ def tight_footprints(x, lo, dcm, a0, a1, a2, grid, cell, tx, ty, pu):
     e, nn, u = x[E, lo:lo + n], x[N, lo:lo + n], x[U, lo:lo + n]
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
     for j in range(n):
-        cell[j], tx[j], ty[j], pu[j] = _footprint(e[j], nn[j], u[j], c00[j], c01[j], c02[j], c10[j], c11[j], c12[j],
-                                                  c20[j], c21[j], c22[j], a0, a1, a2, grid)
+        m = (c00[j], c01[j], c02[j], c10[j], c11[j], c12[j], c20[j], c21[j], c22[j])
+        cell[j], tx[j], ty[j], pu[j] = _footprint(e[j], nn[j], u[j], m, (a0, a1, a2), grid)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -226,15 +228,13 @@ def tight_footprint_pair(x, lo, dcm, vec, i, grid, cell, tx, ty, pu):
     n = dcm.shape[1]
     e, nn, u = x[E, lo:lo + n], x[N, lo:lo + n], x[U, lo:lo + n]
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = _matrix_rows(dcm)
-    a0, a1, a2, b0, b1, b2 = vec[i, 0], vec[i, 1], vec[i, 2], vec[i + 1, 0], vec[i + 1, 1], vec[i + 1, 2]
+    a = (vec[i, 0], vec[i, 1], vec[i, 2])
+    b = (vec[i + 1, 0], vec[i + 1, 1], vec[i + 1, 2])
     cell_a, tx_a, ty_a, pu_a, cell_b, tx_b, ty_b, pu_b = cell[0], tx[0], ty[0], pu[0], cell[1], tx[1], ty[1], pu[1]
     for j in range(n):
-        m00, m01, m02, m10, m11, m12 = c00[j], c01[j], c02[j], c10[j], c11[j], c12[j]
-        m20, m21, m22 = c20[j], c21[j], c22[j]
-        cell_a[j], tx_a[j], ty_a[j], pu_a[j] = _footprint(e[j], nn[j], u[j], m00, m01, m02, m10, m11, m12, m20, m21,
-                                                          m22, a0, a1, a2, grid)
-        cell_b[j], tx_b[j], ty_b[j], pu_b[j] = _footprint(e[j], nn[j], u[j], m00, m01, m02, m10, m11, m12, m20, m21,
-                                                          m22, b0, b1, b2, grid)
+        m = (c00[j], c01[j], c02[j], c10[j], c11[j], c12[j], c20[j], c21[j], c22[j])
+        cell_a[j], tx_a[j], ty_a[j], pu_a[j] = _footprint(e[j], nn[j], u[j], m, a, grid)
+        cell_b[j], tx_b[j], ty_b[j], pu_b[j] = _footprint(e[j], nn[j], u[j], m, b, grid)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
