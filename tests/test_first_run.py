@@ -178,3 +178,38 @@ def test_plot_reaches_every_cell_and_titles_name_it(tmp_path, monkeypatch):
     assert tracks and all("cell" in titles[name] for name in tracks)
     only = plot.plot_results(out, [sweep.cells[2].cell_id[:6]])
     assert {p.name for p in only} >= {f"A_{sweep.cells[2].cell_id}_east.png"}
+
+
+def test_cold_warm_up_covers_every_filter_variant_of_the_sweep(monkeypatch):
+    """A sweep whose cells set different filter options (e.g. the Euler step, which compiles the tight
+    loop once more) warms one cell per distinct filter block before the workers start, in order, the
+    first side by side; cells that differ elsewhere (here the particles) add nothing."""
+    import json
+
+    from tanbench.runner import engine
+    from tanbench.runner.tasks import Task
+
+    def task(filter_block, particles):
+        spec = {"particles": particles, "filter": filter_block}
+        return Task("c", json.dumps(spec), 0, ("tight-dvl",), 1, False)
+
+    euler = {"propagation": "euler-last-second"}
+    todo = [task({}, 100), task({}, 200), task(euler, 100), task(euler, 300)]
+    assert engine.filter_variants(todo) == [todo[0].scenario_json, todo[2].scenario_json]
+
+    calls = []
+    monkeypatch.setattr(engine.kernel_cache, "is_warm", lambda methods: False)
+    monkeypatch.setattr(engine, "compile_groups", lambda methods, processes: [list(methods)])
+    monkeypatch.setattr(engine, "compile_seconds", lambda methods, processes: 1.0)
+    monkeypatch.setattr(engine, "warm_up_side_by_side", lambda s, groups, maps: calls.append(("side", s)))
+    monkeypatch.setattr(engine, "warm_up", lambda s, methods: calls.append(("here", s, tuple(methods))))
+
+    class Spec:
+        methods = ("tight-dvl",)
+
+    class FakePlan:
+        workers = 1
+        sweep = type("Sweep", (), {"spec": Spec})()
+
+    engine.compile_kernels(FakePlan(), todo, False, print)
+    assert calls == [("side", todo[0].scenario_json), ("here", todo[2].scenario_json, ("tight-dvl",))]

@@ -34,7 +34,7 @@ from tqdm import tqdm
 from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
 from tanbench.errors import describe_exception
-from tanbench.runner.executors import open_executor, warm_up_side_by_side
+from tanbench.runner.executors import open_executor, warm_up, warm_up_side_by_side
 from tanbench.runner.plan import (Plan, builtin_methods, check_series_mode, compile_groups, compile_processes,
                                   compile_seconds, cpu_share_now, make_plan, share_of_each)
 from tanbench.runner.resume import ResumeState
@@ -243,6 +243,19 @@ def shared_inputs(sweep: Sweep) -> tuple[dict, dict]:
     return maps, shared_worlds
 
 
+def filter_variants(todo: list[Task]) -> list[str]:
+    """One cell (its scenario JSON) per distinct ``filter`` block among ``todo``, in order of first
+    appearance: a kernel compiles once per option that changes its argument types (e.g. the tight
+    loop's Euler step), so warming up on the first cell only would leave the others to each worker."""
+    seen, cells = set(), []
+    for task in todo:
+        key = json.dumps(json.loads(task.scenario_json).get("filter"), sort_keys=True)
+        if key not in seen:
+            seen.add(key)
+            cells.append(task.scenario_json)
+    return cells
+
+
 def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note, truth_maps: dict | None = None) -> None:
     """Compile the kernels of the sweep's methods into numba's on-disk cache, unless it holds them
     (:func:`tanbench.kernel_cache.is_warm`, the rule of ``plan``'s estimate too), so that
@@ -261,7 +274,10 @@ def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note, truth_ma
         note(f"compiling the numba kernels{side} (once per install or kernel code change; about {guess:.0f} s "
              f"on this machine now)...")
     started = time.perf_counter()
-    warm_up_side_by_side(todo[0].scenario_json, groups, truth_maps)
+    first, *others = filter_variants(todo)
+    warm_up_side_by_side(first, groups, truth_maps)
+    for scenario_json in others:  # the other filter settings' kernels (e.g. the Euler step), in this process
+        warm_up(scenario_json, builtin_methods(methods))
     if progress:
         note(f"compiled in {time.perf_counter() - started:.0f} s; starting the workers")
 
