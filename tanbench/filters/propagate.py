@@ -158,9 +158,10 @@ def _propagate_tight_wound(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, di
     _propagate_tight_near(x, inc, yaw_nav0, noise, sig_pos, sig_up, sig_att, dist_mode, dist_innov, yaw_off, lo)
     s_off, c_off = math.sin(yaw_off), math.cos(yaw_off)
     shared = shared_motion(inc, sig_up, sig_att, dist_mode)
+    lever = _lever(inc)
     for i in range(wound):
         j = which[i]
-        de, dn = _displacement(s_off, c_off, unwound((start[2, i] - yaw_nav0) - yaw_off), bxs[j], bzs[j], _lever(inc),
+        de, dn = _displacement(s_off, c_off, unwound((start[2, i] - yaw_nav0) - yaw_off), bxs[j], bzs[j], lever,
                                sig_pos, nz[0][j], nz[1][j])
         e[j] = start[0, i] + de
         nn[j] = start[1, i] + dn

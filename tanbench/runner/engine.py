@@ -247,13 +247,10 @@ def filter_variants(todo: list[Task]) -> list[str]:
     """One cell (its scenario JSON) per distinct ``filter`` block among ``todo``, in order of first
     appearance: a kernel compiles once per option that changes its argument types (e.g. the tight
     loop's Euler step), so warming up on the first cell only would leave the others to each worker."""
-    seen, cells = set(), []
-    for task in todo:
-        key = json.dumps(json.loads(task.scenario_json).get("filter"), sort_keys=True)
-        if key not in seen:
-            seen.add(key)
-            cells.append(task.scenario_json)
-    return cells
+    by_filter = {}
+    for cell in dict.fromkeys(task.scenario_json for task in todo):  # each cell parsed once, not each run
+        by_filter.setdefault(json.dumps(json.loads(cell).get("filter"), sort_keys=True), cell)
+    return list(by_filter.values())
 
 
 def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note, truth_maps: dict | None = None) -> None:
