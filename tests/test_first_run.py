@@ -263,18 +263,18 @@ def test_the_estimate_counts_each_variant_a_sweep_compiles(tmp_path, monkeypatch
     each other (family, variant) pair once (tight-dvl and tight-sbe share theirs), in the parent."""
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     tight = planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["tight"]
-    euler = planning.COMPILE_VARIANT_S["euler"]
+    euler = planning.COMPILE_LOOP_S + planning.COMPILE_OPTION_S["euler"]
     mixed = ["tight-dvl", "tight-dvl+euler"]
     assert planning.compile_groups(mixed, 2, cold=mixed) == [["tight-dvl"]]
     assert planning.compile_seconds(mixed, cold=mixed) == pytest.approx(tight + euler)
     both = ["tight-dvl", "tight-sbe", "tight-dvl+euler", "tight-sbe+euler"]
     assert planning.compile_seconds(both, cold=both, processes=2) == pytest.approx(tight + euler)
     # the first cell in the Euler step: the family compiles in it, the default loop after
-    assert planning.compile_seconds(mixed[::-1], cold=mixed) == pytest.approx(tight + planning.COMPILE_VARIANT_S[""])
+    assert planning.compile_seconds(mixed[::-1], cold=mixed) == pytest.approx(tight + planning.COMPILE_LOOP_S)
     combined = ["tight-dvl", "tight-dvl+euler+shared-resampling", "loose-dvl+numpy-rng"]
     assert planning.compile_seconds(combined, cold=combined, processes=1) == pytest.approx(
-        tight + planning.COMPILE_FAMILY_S["loose"] + euler + planning.COMPILE_VARIANT_S["shared-resampling"])
-    assert planning.variant_seconds("euler+made-up") == pytest.approx(euler + planning.COMPILE_OTHER_VARIANT_S)
+        tight + planning.COMPILE_FAMILY_S["loose"] + euler + planning.COMPILE_OPTION_S["shared-resampling"])
+    assert planning.variant_seconds("euler+made-up") == pytest.approx(euler + planning.COMPILE_OTHER_OPTION_S)
     # a plan of a sweep whose two cells differ in filter.propagation: its kernels and its estimate
     sweep_file = tmp_path / "mixed.yaml"
     sweep_file.write_text("name: mixed\nseed: 5\nruns: 2\nmethods: [tight-dvl]\nscenario: {particles: 200}\n"
@@ -300,7 +300,8 @@ def test_a_warm_cache_with_a_new_variant_warms_only_that_variant(tmp_path, monke
     assert kernel_cache.cold_methods(kernels) == ["tight-dvl+euler"]
     assert kernel_cache.warm_kernels() == ["loose-dvl", "tight-dvl", "tight-sbe"]
     assert planning.compile_groups(kernels, 2) == []
-    assert planning.compile_seconds(kernels, processes=2) == pytest.approx(planning.COMPILE_VARIANT_S["euler"])
+    assert planning.compile_seconds(kernels, processes=2) == pytest.approx(
+        planning.COMPILE_LOOP_S + planning.COMPILE_OPTION_S["euler"])
     methods = ("tight-dvl", "loose-dvl")
     todo = [_variant_task({}, methods=methods), _variant_task(EULER, methods=methods)]
     calls = _record_warm_ups(monkeypatch, engine)

@@ -43,12 +43,17 @@ COMPILE_FAMILY_S = {"tight": 41.6, "loose": 23.5, "pmf": 13.5, "mpf": 7.5, "ekf"
 COMPILE_REUSES = {"loose": "tight"}
 COMPILE_ALONE_S = {"loose": 45.0}
 COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
-# a variant of a family's kernels (:func:`kernel_variant`) compiled in a cache that holds another variant
-# of the family (its callees load from the cache): thread CPU s per option, measured PLACEHOLDER.
-# A variant of several options counts each option's seconds (a guess: the loop compiles once, with
-# every option's branches); "" is the default variant compiled after another one.
-COMPILE_VARIANT_S = {"": 0.0, "euler": 0.0, "shared-resampling": 0.0, "numpy-rng": 0.0}
-COMPILE_OTHER_VARIANT_S = 20.0  # an option not measured yet (a guess)
+# another variant of a family's kernels (:func:`kernel_variant`) compiled after one of them (its callees
+# then load from the cache): the jitted loop once more, COMPILE_LOOP_S (also the default variant compiled
+# after another), plus each option's own kernels, COMPILE_OPTION_S (the Euler step and its inputs, the
+# shared resampling kernel, numpy's stream fills). Thread CPU s of one process on a fresh cache, 3 Dec 2026
+# at load average 4.7-8.8 (docs/speed.md, "3 December, sixth session"), each scaled by the process's
+# own ratio to the default family it compiled first (COMPILE_SHARED_S + tight, 47.0 s): the loop 4.7, 4.1
+# and 4.5 s; the Euler step's variant 8.0 and 7.9, the shared kernel's 6.7 and 6.6, numpy's 7.6 (tight)
+# and 8.0 (tight and loose, per family). A variant with several options counts each one's kernels once.
+COMPILE_LOOP_S = 4.4
+COMPILE_OPTION_S = {"euler": 3.5, "shared-resampling": 2.3, "numpy-rng": 3.4}
+COMPILE_OTHER_OPTION_S = 20.0  # an option not measured yet (a guess)
 # a helper process starting (spawn, imports: 1.5-1.6 s CPU) and the parent loading the kernels it
 # compiled afterwards (0.1 s), measured 3 Dec 2026
 COMPILE_JOIN_S = 1.7
@@ -152,10 +157,10 @@ def compile_groups(methods, processes: int = 1, cold=None) -> list[list[str]]:
 
 
 def variant_seconds(variant: str) -> float:
-    """Seconds one more ``variant`` of a family's kernels compiles in (:data:`COMPILE_VARIANT_S`)."""
-    if not variant:
-        return COMPILE_VARIANT_S[""]
-    return sum(COMPILE_VARIANT_S.get(part, COMPILE_OTHER_VARIANT_S) for part in variant.split("+"))
+    """Seconds one more ``variant`` of a family's kernels compiles in, after another variant of the family:
+    :data:`COMPILE_LOOP_S` plus each option's :data:`COMPILE_OPTION_S`."""
+    options = variant.split("+") if variant else []
+    return COMPILE_LOOP_S + sum(COMPILE_OPTION_S.get(o, COMPILE_OTHER_OPTION_S) for o in options)
 
 
 def variant_compile_s(methods, cold=None) -> float:
@@ -236,10 +241,12 @@ class Plan:
         return self.costs[task.cell_id]
 
     def kernels(self, tasks=None) -> list[str]:
-        """The kernel names (:func:`cell_kernels`) of the cells of ``tasks`` (default: what is left to do)."""
+        """The kernel names (:func:`cell_kernels`) of the cells of ``tasks`` (default: what is left to do),
+        in the order ``run`` warms them up (its tasks' order: the costliest cell first)."""
         tasks = self.todo if tasks is None else tasks
-        cells = {t.cell_id for t in tasks}
-        return sweep_kernels((c.scenario for c in self.sweep.cells if c.cell_id in cells), self.sweep.spec.methods)
+        cells = {c.cell_id: c.scenario for c in self.sweep.cells}
+        order = dict.fromkeys(t.cell_id for t in sorted(tasks, key=self.task_cost, reverse=True))
+        return sweep_kernels((cells[c] for c in order), self.sweep.spec.methods)
 
     def estimate_seconds(self, tasks=None) -> float:
         """Wall seconds of running ``tasks`` (default: what is left to do), compilation included."""
