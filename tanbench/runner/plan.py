@@ -54,6 +54,9 @@ COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
 COMPILE_LOOP_S = 4.4
 COMPILE_OPTION_S = {"euler": 3.5, "shared-resampling": 2.3, "numpy-rng": 3.4}
 COMPILE_OTHER_OPTION_S = 20.0  # an option not measured yet (a guess)
+# a process loading a family's cached kernels (and the simulation's) before it compiles only another variant
+# of it (a cache warmed by another sweep): thread CPU 1.30 and 1.33 s, load average 5.7-5.8, 3 Dec 2026
+COMPILE_LOAD_S = 1.3
 # a helper process starting (spawn, imports: 1.5-1.6 s CPU) and the parent loading the kernels it
 # compiled afterwards (0.1 s), measured 3 Dec 2026
 COMPILE_JOIN_S = 1.7
@@ -203,12 +206,13 @@ def compile_seconds(methods, cold=None, processes: int = 1) -> float:
     machine idle, with ``processes`` processes compiling groups of families side by side
     (:func:`compile_groups`): the longest group's families (:func:`group_compile_s`) plus the shared
     simulation kernels (every process compiles those), plus starting the helpers and loading their
-    kernels afterwards; then, in the parent, the families' other variants (:func:`variant_compile_s`).
+    kernels afterwards; then, in the parent, the families' other variants (:func:`variant_compile_s`;
+    with no family to compile, after loading the cached ones, :data:`COMPILE_LOAD_S`).
     One process: the sum of all."""
     groups = compile_groups(methods, processes, cold)
     variants = variant_compile_s(methods, cold)
-    if not groups:
-        return variants
+    if not groups:  # only variants: the parent loads their families first
+        return COMPILE_LOAD_S + variants if variants else 0.0
     longest = max(group_compile_s({family_of(m) for m in g}) for g in groups)
     return COMPILE_SHARED_S + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0) + variants
 
