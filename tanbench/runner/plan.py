@@ -15,6 +15,8 @@ from pathlib import Path
 
 from tanbench import kernel_cache
 from tanbench.errors import TanbenchError
+from tanbench.filters.posterior import REG_POSTERIOR
+from tanbench.filters.tight import readings_of, tight_resampling_of
 from tanbench.methods.registry import builtin_names, get
 from tanbench.runner.tasks import Task
 from tanbench.sweep import Sweep
@@ -104,9 +106,6 @@ def kernel_variant(method: str, scenario) -> str:
     if family in RNG_FAMILIES and f.random_numbers != "fast":
         parts.append(f"{f.random_numbers}-rng")
     if family == "tight":
-        from tanbench.filters.posterior import REG_POSTERIOR
-        from tanbench.filters.tight import readings_of, tight_resampling_of
-
         if readings_of(f, scenario.sampling_time_s).propagation != 0:
             parts.append("euler")
         if tight_resampling_of(f).kind != REG_POSTERIOR:
