@@ -15,8 +15,7 @@ from pathlib import Path
 
 from tanbench import kernel_cache
 from tanbench.errors import TanbenchError
-from tanbench.filters.posterior import REG_POSTERIOR
-from tanbench.filters.tight import readings_of, tight_resampling_of
+from tanbench.filters.tight import loop_options, readings_of, tight_resampling_of
 from tanbench.methods.registry import builtin_names, get
 from tanbench.runner.tasks import Task
 from tanbench.sweep import Sweep
@@ -96,20 +95,17 @@ def kernel_variant(method: str, scenario) -> str:
     else the options that give its jitted loop other argument types (numba compiles it once more for
     each), joined by "+": ``numpy-rng`` (``filter.random_numbers: numpy``:
     :func:`tanbench.filters.rng.loop_rng` gives the loop numpy's stream), and for the tight loop
-    ``euler`` and ``shared-resampling``, read off the bundles of which
-    :func:`tanbench.filters.tight.tight_filter_loop` passes ``euler_in`` and ``shared_rs`` as None
-    (the Euler step and the shared kernel then compile; tests/test_first_run.py checks the two
-    readings agree). Other options run in branches compiled either way."""
+    ``euler`` and ``shared-resampling``, from :func:`tanbench.filters.tight.loop_options`, which
+    also decides whether :func:`tanbench.filters.tight.tight_filter_loop` passes ``euler_in`` and
+    ``shared_rs`` as None (the Euler step and the shared kernel then compile). Other options run in branches compiled either way."""
     family = family_of(method)
     f = scenario.filter
     parts = []
     if family in RNG_FAMILIES and f.random_numbers != "fast":
         parts.append(f"{f.random_numbers}-rng")
     if family == "tight":
-        if readings_of(f, scenario.sampling_time_s).propagation != 0:
-            parts.append("euler")
-        if tight_resampling_of(f).kind != REG_POSTERIOR:
-            parts.append("shared-resampling")
+        euler_step, shared_resampling = loop_options(readings_of(f, scenario.sampling_time_s), tight_resampling_of(f))
+        parts += ["euler"] * euler_step + ["shared-resampling"] * shared_resampling
     return "+".join(parts)
 
 
