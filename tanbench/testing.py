@@ -71,7 +71,7 @@ def check_method(method: str, scenario=None, executors: bool = True) -> Conforma
     _check_contract(first, vehicle, scenario, record)
     report.checks.append("output contract: shapes, types, finite estimates, metrics and series")
 
-    _assert_same_tree(vehicle, before, "observations/truth after the run")
+    assert_same_tree(vehicle, before, "observations/truth after the run")
     assert np.array_equal(nmap.z, map_before, equal_nan=True), f"{method}: the navigation map was modified"
     report.checks.append("no shared input (observations, navigation map) is mutated")
 
@@ -130,10 +130,13 @@ def _assert_same_result(a, b, message) -> None:
             f"{message} (series {key})"
 
 
-def _assert_same_tree(a, b, path) -> None:
+def assert_same_tree(a, b, path="vehicle") -> None:
+    """Assert two dataclass / array / scalar trees are the same, bit for bit (NaN equal to NaN);
+    a dataclass field declared ``compare=False`` is left out (a derived memory, not data)."""
     if hasattr(a, "__dataclass_fields__"):
-        for name in a.__dataclass_fields__:
-            _assert_same_tree(getattr(a, name), getattr(b, name), f"{path}.{name}")
+        for f in a.__dataclass_fields__.values():
+            if f.compare:  # not a derived memory such as Observations.shared_increments
+                assert_same_tree(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
     elif isinstance(a, np.ndarray):
         assert np.array_equal(a, b, equal_nan=True), f"a method modified {path}"
     elif isinstance(a, float) and math.isnan(a):

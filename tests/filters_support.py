@@ -8,7 +8,6 @@ constants here.
 from __future__ import annotations
 
 import copy
-import math
 
 import numpy as np
 
@@ -67,14 +66,3 @@ def snapshot(obj):
     return copy.deepcopy(obj)
 
 
-def assert_same_tree(a, b, path="vehicle"):
-    """Recursively assert two dataclass/array/scalar trees are bit-identical."""
-    if hasattr(a, "__dataclass_fields__"):
-        for name in a.__dataclass_fields__:
-            assert_same_tree(getattr(a, name), getattr(b, name), f"{path}.{name}")
-    elif isinstance(a, np.ndarray):
-        np.testing.assert_array_equal(a, b, err_msg=path)
-    elif isinstance(a, float) and math.isnan(a):
-        assert math.isnan(b), path
-    else:
-        assert a == b, path

@@ -18,7 +18,7 @@ import math
 import numpy as np
 import pytest
 
-from filters_support import assert_same_tree, series_keys, short_scenario, snapshot
+from filters_support import series_keys, short_scenario, snapshot
 from tanbench.options import REGULARISATION, RESAMPLING
 from tanbench.errors import TanbenchError
 from tanbench.methods.registry import builtin_names, get, particle_steps
@@ -30,6 +30,7 @@ from tanbench.filters.state import N_TIGHT, YAW
 from tanbench.filters.tight import REGULARISED_STATES
 from tanbench.simulation import simulate_vehicle
 from tanbench.terrain.grid import Map
+from tanbench.testing import assert_same_tree
 
 METHODS = builtin_names()
 # the randomised methods, whose budget is the particle count (grid, Kalman and batch methods are
