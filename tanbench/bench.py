@@ -42,7 +42,6 @@ from tanbench.runner.engine import cell_columns, store_result
 from tanbench.runner.plan import make_plan
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import execute
-from tanbench.navigation.increments import compute_increments
 from tanbench.sensors.multibeam import fan_angles_deg, fan_vectors, swath_ranges
 from tanbench.simulation import noise_free_world, simulate_vehicle
 from tanbench.sweep import parse_sweep
@@ -119,7 +118,7 @@ def bench_state(particles: int) -> dict:
     # headings about the true one, as a converged cloud's: ~30 degrees off the navigation's
     x0[5] = vehicle.truth.yaw[upd[k]] + rng.normal(0, 0.02, particles)
     x0[6:] = rng.normal(0, 1e-4, (2, particles))
-    inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    inc = ctx.increments()
     yaw_off = float(np.mean(x0[5]) - nav.yaw[upd[k]])  # the cloud's heading offset, as the loop keeps it
     ranges = np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows[k + 1]])
     c = dcm_body_to_nav_numpy(np.array([nav.pitch[upd[k + 1]]]), np.array([nav.roll[upd[k + 1]]]),

@@ -202,7 +202,7 @@ def plan(
     from collections import Counter
 
     from tanbench import kernel_cache
-    from tanbench.runner.plan import builtin_methods, current_load, default_workers, make_plan
+    from tanbench.runner.plan import current_load, default_workers, make_plan
     from tanbench.runner.resume import ResumeState
     from tanbench.runner.validate import check_methods
 
@@ -223,8 +223,8 @@ def plan(
     if not todo:
         typer.echo(f"to do: nothing, every task is stored in {out} ({_count(0, n_m)} left)")
         return
-    warm = kernel_cache.is_warm(builtin_methods(sweep.spec.methods))
-    parts = p.estimate_parts(warm=warm)
+    warm = kernel_cache.is_warm(p.kernels())  # each method in each variant its cells compile
+    parts = p.estimate_parts()
     start = (f"{parts['compile']:.0f} s compiling the numba kernels (cold cache) and starting workers"
              if not warm else f"{parts['compile']:.0f} s starting workers (kernels cached)")
     typer.echo(f"to do: {_count(len(todo), n_m)}, about {sum(parts.values()):.0f} s on {min(p.workers, max(1, len(todo)))} "

@@ -109,15 +109,34 @@ def use_kernel_cache() -> Path:
     return path
 
 
-WARM_MARK = "warmed-"  # + a built-in method's name: a file in the cache directory once its kernels are in it
+WARM_MARK = "warmed-"  # + a kernel name (:func:`kernel_name`): a file in the cache directory once its kernels are in it
+VARIANT_SEP = "+"  # between a built-in method's name and the variant of its kernels in a kernel name
+
+
+def kernel_name(method: str, variant: str = "") -> str:
+    """The name a warm mark carries for ``method``'s kernels compiled in ``variant`` (the options that
+    change their argument types, ``tanbench.runner.plan.kernel_variant``): the method's name for its
+    default variant (""), else ``method+variant``."""
+    return f"{method}{VARIANT_SEP}{variant}" if variant else method
+
+
+def method_of(kernel: str) -> str:
+    """The method of a kernel name (:func:`kernel_name`)."""
+    return kernel.split(VARIANT_SEP, 1)[0]
+
+
+def variant_of(kernel: str) -> str:
+    """The variant of a kernel name (:func:`kernel_name`; "" for the default)."""
+    return kernel.partition(VARIANT_SEP)[2]
 
 
 def is_warm(methods=None) -> bool:
     """Whether the cache holds the kernels of the main filter module (a sweep then loads them
     instead of compiling; the rule of ``plan``'s estimate and of ``run``'s compile message).
 
-    With ``methods`` (built-in method names): whether it holds the kernels of each, as marked
-    by :func:`mark_warm` once a warm-up compiled them here.
+    With ``methods`` (kernel names, :func:`kernel_name`: built-in method names, each in its default
+    variant or with ``+variant``): whether it holds the kernels of each, as marked by
+    :func:`mark_warm` once a warm-up compiled them here.
     """
     if methods is None:
         path = cache_dir()
@@ -126,14 +145,23 @@ def is_warm(methods=None) -> bool:
 
 
 def cold_methods(methods) -> list[str]:
-    """The built-in ``methods`` whose kernels this cache does not hold yet."""
+    """The kernel names among ``methods`` (:func:`kernel_name`) whose kernels this cache does not hold yet."""
     path = cache_dir()
     return [name for name in methods if not (path / f"{WARM_MARK}{name}").is_file()]
 
 
+def warm_kernels() -> list[str]:
+    """Every kernel name (:func:`kernel_name`) marked warm in this cache, sorted."""
+    path = cache_dir()
+    try:
+        return sorted(p.name[len(WARM_MARK):] for p in path.glob(f"{WARM_MARK}*"))
+    except OSError:
+        return []
+
+
 def mark_warm(methods) -> None:
-    """Record that the kernels of these built-in ``methods`` are in the cache (after a warm-up
-    ran each one here); a cache that cannot be written is simply not marked."""
+    """Record that the kernels of these kernel names (:func:`kernel_name`) are in the cache (after a
+    warm-up ran each one here); a cache that cannot be written is simply not marked."""
     path = cache_dir()
     try:
         path.mkdir(parents=True, exist_ok=True)

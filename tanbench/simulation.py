@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
 from tanbench.config import Scenario
 from tanbench.errors import TanbenchError
+from tanbench.navigation.increments import SharedIncrements
 from tanbench.navigation.ins import run_strapdown
 from tanbench.sensors.dvl import measure_velocity
 from tanbench.sensors.faults import (add_current, add_outliers, delay_pings, dropout_mask, far_start_offset,
@@ -76,6 +77,8 @@ class Observations:
     nav: NavSolution
     mbe_beams: np.ndarray | None = None  # (N, 3) the multibeam's nominal fan; None without a multibeam
     mbe_ranges: np.ndarray | None = None  # (pings, N) at the DVL pings, NaN rows where it did not ping
+    # the run's increments tables, computed once and shared by its methods (their copies of these observations)
+    shared_increments: SharedIncrements = field(default_factory=SharedIncrements, repr=False, compare=False)
 
 
 @dataclass

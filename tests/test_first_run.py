@@ -180,36 +180,141 @@ def test_plot_reaches_every_cell_and_titles_name_it(tmp_path, monkeypatch):
     assert {p.name for p in only} >= {f"A_{sweep.cells[2].cell_id}_east.png"}
 
 
-def test_cold_warm_up_covers_every_filter_variant_of_the_sweep(monkeypatch):
+EULER = {"propagation": "euler-last-second"}
+SHARED = {"tight_regularisation": "shared"}
+
+
+def _variant_task(filter_block, particles=100, methods=("tight-dvl",)):
+    import json
+
+    from tanbench.runner.tasks import Task
+
+    return Task("c", json.dumps({"particles": particles, "filter": filter_block}), 0, methods, 1, False)
+
+
+def _compile_plan(methods=("tight-dvl",), workers=1):
+    class Spec:
+        pass
+
+    Spec.methods = methods
+
+    class FakePlan:
+        pass
+
+    FakePlan.workers = workers
+    FakePlan.sweep = type("Sweep", (), {"spec": Spec})()
+    return FakePlan()
+
+
+def _record_warm_ups(monkeypatch, engine):
+    calls = []
+    monkeypatch.setattr(engine, "cpu_share_now", lambda: 1.0)
+    monkeypatch.setattr(engine, "warm_up_side_by_side", lambda s, groups, maps: calls.append(("side", s, groups)))
+    monkeypatch.setattr(engine, "warm_up", lambda s, methods: calls.append(("here", s, tuple(methods))))
+    return calls
+
+
+def test_cold_warm_up_covers_every_filter_variant_of_the_sweep(tmp_path, monkeypatch):
     """A sweep whose cells set different filter options (e.g. the Euler step, which compiles the tight
     loop once more) warms one cell per distinct filter block before the workers start, in order, the
     first side by side; cells that differ elsewhere (here the particles) add nothing."""
-    import json
-
     from tanbench.runner import engine
-    from tanbench.runner.tasks import Task
 
-    def task(filter_block, particles):
-        spec = {"particles": particles, "filter": filter_block}
-        return Task("c", json.dumps(spec), 0, ("tight-dvl",), 1, False)
-
-    euler = {"propagation": "euler-last-second"}
-    todo = [task({}, 100), task({}, 200), task(euler, 100), task(euler, 300)]
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))  # an empty cache: every kernel cold
+    todo = [_variant_task({}, 100), _variant_task({}, 200), _variant_task(EULER, 100), _variant_task(EULER, 300)]
     assert engine.filter_variants(todo) == [todo[0].scenario_json, todo[2].scenario_json]
+    calls = _record_warm_ups(monkeypatch, engine)
+    engine.compile_kernels(_compile_plan(), todo, False, print)
+    assert calls == [("side", todo[0].scenario_json, [["tight-dvl"]]), ("here", todo[2].scenario_json, ("tight-dvl",))]
 
-    calls = []
-    monkeypatch.setattr(engine.kernel_cache, "is_warm", lambda methods: False)
-    monkeypatch.setattr(engine, "compile_groups", lambda methods, processes: [list(methods)])
-    monkeypatch.setattr(engine, "compile_seconds", lambda methods, processes: 1.0)
-    monkeypatch.setattr(engine, "warm_up_side_by_side", lambda s, groups, maps: calls.append(("side", s)))
-    monkeypatch.setattr(engine, "warm_up", lambda s, methods: calls.append(("here", s, tuple(methods))))
 
-    class Spec:
-        methods = ("tight-dvl",)
+def test_kernel_variant_is_what_the_tight_loop_compiles(monkeypatch):
+    """A cell's kernel variant names the options that give the jitted tight loop other argument types:
+    the Euler inputs and the shared resampling bundle that ``tight_filter_loop`` passes instead of None
+    (captured here from the function itself), and numpy's random numbers (tight and loose)."""
+    from types import SimpleNamespace
 
-    class FakePlan:
-        workers = 1
-        sweep = type("Sweep", (), {"spec": Spec})()
+    from tanbench.config import Scenario
+    from tanbench.filters import tight
 
-    engine.compile_kernels(FakePlan(), todo, False, print)
-    assert calls == [("side", todo[0].scenario_json), ("here", todo[2].scenario_json, ("tight-dvl",))]
+    seen = []
+    monkeypatch.setattr(tight, "_tight_loop", lambda *args: seen.append((args[-2] is not None, args[-1] is not None)))
+    nmap = SimpleNamespace(e0=0.0, e_max=1.0, n0=0.0, n_max=1.0)
+    cases = [("", {}), ("euler", EULER), ("shared-resampling", SHARED), ("euler+shared-resampling", {**EULER, **SHARED}),
+             ("shared-resampling", {"regularisation": "none"}),  # no jitter: the shared kernel's switch
+             ("numpy-rng", {"random_numbers": "numpy"}), ("numpy-rng+euler", {**EULER, "random_numbers": "numpy"})]
+    for variant, block in cases:
+        scenario = Scenario(filter=block)
+        settings = tight.tight_settings(scenario, nmap)
+        tight.tight_filter_loop(None, None, tight.TightTrack(*[None] * 5, "euler inputs"), None, None, None, settings,
+                                None)
+        assert planning.kernel_variant("tight-dvl", scenario) == variant
+        assert planning.kernel_variant("tight-sbe", scenario) == variant
+        assert seen[-1] == ("euler" in variant, "shared" in variant)
+        assert planning.kernel_variant("loose-dvl", scenario) == ("numpy-rng" if "numpy" in variant else "")
+        assert planning.kernel_variant("pmf-dvl", scenario) == ""
+        assert planning.cell_kernels(scenario, ("tight-dvl", "pmf-dvl", "my.module:run")) == [
+            kernel_cache.kernel_name("tight-dvl", variant), "pmf-dvl"]
+    assert len(seen) == len(cases)
+
+
+def test_the_estimate_counts_each_variant_a_sweep_compiles(tmp_path, monkeypatch):
+    """The compile estimate counts the families compiled from nothing (the first variant of each) plus
+    each other (family, variant) pair once (tight-dvl and tight-sbe share theirs), in the parent."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    tight = planning.COMPILE_SHARED_S + planning.COMPILE_FAMILY_S["tight"]
+    euler = planning.COMPILE_LOOP_S + planning.COMPILE_OPTION_S["euler"]
+    mixed = ["tight-dvl", "tight-dvl+euler"]
+    assert planning.compile_groups(mixed, 2, cold=mixed) == [["tight-dvl"]]
+    assert planning.compile_seconds(mixed, cold=mixed) == pytest.approx(tight + euler)
+    both = ["tight-dvl", "tight-sbe", "tight-dvl+euler", "tight-sbe+euler"]
+    assert planning.compile_seconds(both, cold=both, processes=2) == pytest.approx(tight + euler)
+    # the first cell in the Euler step: the family compiles in it, the default loop after
+    assert planning.compile_seconds(mixed[::-1], cold=mixed) == pytest.approx(tight + planning.COMPILE_LOOP_S)
+    combined = ["tight-dvl", "tight-dvl+euler+shared-resampling", "loose-dvl+numpy-rng"]
+    assert planning.compile_seconds(combined, cold=combined, processes=1) == pytest.approx(
+        tight + planning.COMPILE_FAMILY_S["loose"] + euler + planning.COMPILE_OPTION_S["shared-resampling"])
+    assert planning.variant_seconds("euler+made-up") == pytest.approx(euler + planning.COMPILE_OTHER_OPTION_S)
+    # a plan of a sweep whose two cells differ in filter.propagation: its kernels and its estimate
+    sweep_file = tmp_path / "mixed.yaml"
+    sweep_file.write_text("name: mixed\nseed: 5\nruns: 2\nmethods: [tight-dvl]\nscenario: {particles: 200}\n"
+                          "tables:\n  prop: {filter.propagation: [exact, euler-last-second]}\n")
+    plan = planning.make_plan(load_sweep(sweep_file), tmp_path / "out", workers=1)
+    assert plan.kernels() == mixed
+    assert plan.kernels(plan.tasks[:1]) == ["tight-dvl"]
+    monkeypatch.setattr(planning, "default_workers", lambda: 2)
+    idle = plan.estimate_parts(load=0.0, warm=False)
+    assert idle["compile"] == pytest.approx(tight + euler + planning.WARM_START_S)
+    assert plan.estimate_parts(load=0.0)["compile"] == pytest.approx(idle["compile"])  # the empty cache: all cold
+
+
+def test_a_warm_cache_with_a_new_variant_warms_only_that_variant(tmp_path, monkeypatch):
+    """A cache marked warm for the defaults (e.g. after configs/quick.yaml) is cold for a cell's new
+    variant and warm for the rest: the estimate counts that variant only, and the run warms it up in
+    the parent (no side-by-side helpers) before the workers start; marked warm, nothing more."""
+    from tanbench.runner import engine, executors
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    kernel_cache.mark_warm(["tight-dvl", "tight-sbe", "loose-dvl"])
+    kernels = ["tight-dvl", "loose-dvl", "tight-dvl+euler", "loose-dvl"]
+    assert kernel_cache.cold_methods(kernels) == ["tight-dvl+euler"]
+    assert kernel_cache.warm_kernels() == ["loose-dvl", "tight-dvl", "tight-sbe"]
+    assert planning.compile_groups(kernels, 2) == []
+    assert planning.compile_seconds(kernels, processes=2) == pytest.approx(  # after loading the cached family
+        planning.COMPILE_LOAD_S + planning.COMPILE_LOOP_S + planning.COMPILE_OPTION_S["euler"])
+    methods = ("tight-dvl", "loose-dvl")
+    todo = [_variant_task({}, methods=methods), _variant_task(EULER, methods=methods)]
+    calls = _record_warm_ups(monkeypatch, engine)
+    engine.compile_kernels(_compile_plan(methods, workers=2), todo, False, print)
+    assert calls == [("here", todo[1].scenario_json, ("tight-dvl",))]
+    # the warm-up marks each method in the cell's variant
+    monkeypatch.setattr("tanbench.methods.run_method", lambda scenario, method, vehicle, seed: None)
+    monkeypatch.setattr("tanbench.simulation.simulate_vehicle", lambda scenario, seed: None)
+    executors.warm_up(todo[1].scenario_json, methods)
+    assert kernel_cache.warm_kernels() == ["loose-dvl", "tight-dvl", "tight-dvl+euler", "tight-sbe"]
+    assert planning.compile_seconds(kernels, processes=2) == 0.0
+    calls.clear()
+    engine.compile_kernels(_compile_plan(methods, workers=2), todo, False, print)
+    assert calls == []
+
+

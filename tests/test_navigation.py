@@ -129,34 +129,40 @@ def test_increments_jit_matches_numpy_reference(paper_run, synthetic_nav):
 
 
 def test_increments_computed_once_for_a_runs_methods(paper_run, monkeypatch):
-    """The methods of a run (each with its own read-only views of the run's navigation solution,
-    read-only since simulated) get the table computed once, as a copy of their own; writeable
-    arrays, other updates or another dt are computed again, with the same numbers."""
-    from tanbench.methods.api import method_inputs
+    """The methods of a run (each with its own read-only copy of the run's observations) get the
+    table computed once, through their contexts, as a copy of their own; writeable arrays, other
+    updates, another dt or another navigation solution are computed again, with the same numbers."""
+    import dataclasses
+
+    from tanbench.methods.api import MethodContext, method_inputs
     from tanbench.terrain.grid import Map
 
     calls = []
     kernel = inc.interval_increments
     monkeypatch.setattr(inc, "interval_increments", lambda *a: calls.append(1) or kernel(*a))
-    monkeypatch.setattr(inc, "_LAST", [None])
-    nav, dt = paper_run.obs.nav, paper_run.obs.dt
+    run_obs = dataclasses.replace(paper_run.obs, shared_increments=inc.SharedIncrements())  # none computed yet
+    nav, dt = run_obs.nav, run_obs.dt
     assert not any(a.flags.writeable for a in (nav.pos, nav.pitch, nav.roll, nav.yaw))
     upd = np.arange(0, nav.yaw.size, 100)
     nmap = Map(z=np.zeros((2, 2)), e0=0.0, n0=0.0, res_e=1.0, res_n=1.0)
     tables = []
-    for _ in range(3):  # three methods' views of the same run
-        obs, _ = method_inputs(paper_run.obs, nmap)
-        tables.append(compute_increments(dt, obs.nav.pos, obs.nav.pitch, obs.nav.roll, obs.nav.yaw, upd.copy()))
+    for _ in range(3):  # three methods' contexts on the same run
+        obs, own_map = method_inputs(run_obs, nmap)
+        updates = type("Updates", (), {"imu": upd.copy()})()
+        ctx = MethodContext(name="m", scenario=None, obs=obs, nmap=own_map, updates=updates, rng=None)
+        tables.append(ctx.increments())
         tables[-1][:] = -1.0  # a method's copy is its own
     assert len(calls) == 1
-    first = compute_increments(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    shared = run_obs.shared_increments
+    first = shared.table(dt, nav, upd)
     assert len(calls) == 1
-    writeable = [np.array(a) for a in (nav.pos, nav.pitch, nav.roll, nav.yaw)]
-    again = compute_increments(dt, *writeable, upd)
-    other_upd = compute_increments(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd[:-1])
-    other_dt = compute_increments(dt * 2, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    writeable = dataclasses.replace(nav, **{k: np.array(getattr(nav, k)) for k in ("pos", "pitch", "roll", "yaw")})
+    again = shared.table(dt, writeable, upd)
+    other_upd = shared.table(dt, nav, upd[:-1])
+    other_dt = shared.table(dt * 2, nav, upd)
     assert len(calls) == 4
     assert first.tobytes() == again.tobytes() == other_upd.tobytes() + first[-1].tobytes()
+    assert first.tobytes() == compute_increments(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd).tobytes()
     assert other_dt.tobytes() != first.tobytes()
     np.testing.assert_allclose(first, increments_numpy(dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd),
                                rtol=1e-12, atol=1e-9)

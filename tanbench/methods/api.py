@@ -68,6 +68,12 @@ class MethodContext:
         """The navigation system's solution at every IMU sample (``obs.nav``)."""
         return self.obs.nav
 
+    def increments(self) -> np.ndarray:
+        """The navigation solution's increments between the updates (K - 1, 12)
+        (:func:`tanbench.navigation.increments.compute_increments`): computed once per run for
+        all its methods, a copy of this method's own."""
+        return self.obs.shared_increments.table(self.obs.dt, self.obs.nav, self.updates.imu)
+
 
 @dataclass
 class MethodOutput:

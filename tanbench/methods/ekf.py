@@ -15,7 +15,7 @@ from tanbench.filters.ekf import ekf_settings
 from tanbench.filters.ekf import run_ekf as ekf_driver
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.navigation.increments import compute_increments, nav_at_updates
+from tanbench.navigation.increments import nav_at_updates
 from tanbench.units import DEG_PER_H
 
 
@@ -30,7 +30,7 @@ class EkfOptions(BaseModel):
 def run_ekf_dvl(ctx: MethodContext) -> MethodOutput:
     """The iterated EKF (SITAN) on the 4 DVL beams with slopes over the position uncertainty."""
     obs, nav, upd = ctx.obs, ctx.nav, ctx.updates.imu
-    inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    inc = ctx.increments()
     out = ekf_driver(nav_at_updates(nav, upd), inc, obs.dvl_beams, obs.dvl_ranges[ctx.updates.rows],
                      ctx.nmap.kernel_args(), ekf_settings(ctx.scenario, ctx.options))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],

@@ -27,7 +27,6 @@ from tanbench.filters.loose_turned import LOOSE_TURNED_COLS, Gates, TurnedTrack,
 from tanbench.filters.state import N_LOOSE, N_TIGHT
 from tanbench.filters.tight import collapse_resampling_of, divergence_of, guard_of, readings_of
 from tanbench.navigation.eskf import EB, EE, EN, EPSI, N_ERROR
-from tanbench.navigation.increments import compute_increments
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -67,10 +66,10 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
 
 def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed) -> MethodOutput:
     """The closed loop: PF -> terrain-only fixes -> navigation KF -> corrected navigation -> PF."""
-    sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
+    sc, nav, upd = ctx.scenario, ctx.nav, ctx.updates.imu
     f, s, T = sc.filter, sc.sensors, sc.sampling_time_s
     k = upd.size
-    inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
+    inc = ctx.increments()
     p_kf = np.zeros((N_ERROR, N_ERROR))
     p_kf[EE, EE] = p_kf[EN, EN] = f.initial_area_m ** 2 / 12.0
     p_kf[EPSI, EPSI] = f.initial_std_heading_rad ** 2

@@ -15,7 +15,7 @@ from tanbench.filters.mpf import mpf_settings
 from tanbench.filters.mpf import run_mpf as mpf_driver
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.navigation.increments import compute_increments, nav_at_updates
+from tanbench.navigation.increments import nav_at_updates
 from tanbench.units import DEG_PER_H
 
 
@@ -29,7 +29,7 @@ class MpfOptions(BaseModel):
 def run_mpf_dvl(ctx: MethodContext) -> MethodOutput:
     """The marginalized PF: particles for position and yaw, a KF per particle for depth and z-gyro biases."""
     obs, upd = ctx.obs, ctx.updates.imu
-    inc = compute_increments(obs.dt, ctx.nav.pos, ctx.nav.pitch, ctx.nav.roll, ctx.nav.yaw, upd)
+    inc = ctx.increments()
     out = mpf_driver(nav_at_updates(ctx.nav, upd), inc, obs.dvl_beams, obs.dvl_ranges[ctx.updates.rows],
                      ctx.nmap.kernel_args(), ctx.rng, mpf_settings(ctx.scenario, ctx.options))
     return MethodOutput(east=out["est_e"], north=out["est_n"], yaw=out["est_yaw"], var_e=out["var_e"],

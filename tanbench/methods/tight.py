@@ -18,7 +18,7 @@ from tanbench.filters.tight import (TightSettings, TightTrack, init_tight, new_t
                                     tight_settings)
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.navigation.increments import N_EULER, compute_euler_inputs, compute_increments
+from tanbench.navigation.increments import N_EULER, compute_euler_inputs
 from tanbench.units import DEG_PER_H
 
 TIGHT_STATES = ("east", "north", "up", "pitch", "roll", "heading", "gyro_bias_x", "gyro_bias_z")
@@ -45,9 +45,8 @@ def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
 
 def tight_track(ctx: MethodContext) -> TightTrack:
     """The navigation solution at the run's updates, as the tight loop reads it."""
-    obs, nav, upd = ctx.obs, ctx.nav, ctx.updates.imu
-    inc = compute_increments(obs.dt, nav.pos, nav.pitch, nav.roll, nav.yaw, upd)
-    return TightTrack(inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2], euler_inputs_of(ctx))
+    nav, upd = ctx.nav, ctx.updates.imu
+    return TightTrack(ctx.increments(), nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2], euler_inputs_of(ctx))
 
 
 def tight_start(ctx: MethodContext, settings: TightSettings):

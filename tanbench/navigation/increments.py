@@ -87,31 +87,43 @@ def interval_increments(dt, pos, pitch, roll, yaw, update_idx, out):
 
 
 def compute_increments(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:
-    """The (K, 12) increments table for the intervals between ``update_idx`` samples.
-
-    The methods of a run all ask for the same table (the run's navigation solution at the
-    same updates): when the four arrays cannot change (their memory read-only, as a simulated
-    run's navigation solution is), the last table computed is given again (a copy of it)
-    for the same memory, ``dt`` and updates instead of being computed again.
-    """
+    """The (K, 12) increments table for the intervals between ``update_idx`` samples."""
     update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
-    arrays = (pos, pitch, roll, yaw)
-    frozen = all(_frozen(a) for a in arrays)
-    if frozen:
-        last = _LAST[0]
-        if (last is not None and last[1] == dt and all(_same_memory(a, b) for a, b in zip(arrays, last[0]))
-                and np.array_equal(last[2], update_idx)):
-            return last[3].copy()
     out = np.empty((max(update_idx.size - 1, 0), N_INCREMENTS))
     interval_increments(dt, np.ascontiguousarray(pos), np.ascontiguousarray(pitch),
                         np.ascontiguousarray(roll), np.ascontiguousarray(yaw), update_idx, out)
-    if frozen:  # the arrays are kept: their memory cannot be freed and reused while remembered
-        _LAST[0] = (arrays, dt, update_idx.copy(), out.copy())
     return out
 
 
-# the last table computed from read-only arrays: (arrays, dt, update_idx, table)
-_LAST: list = [None]
+class SharedIncrements:
+    """The increments tables of one run's navigation solution, each computed once and shared by
+    the run's methods.
+
+    A run's observations carry one (``Observations.shared_increments``, handed on to every
+    method's own copy of them); a method asks through its context
+    (:meth:`tanbench.methods.api.MethodContext.increments`) and gets a copy of its own. A table
+    is remembered only while the navigation arrays cannot change (read-only, as a method's
+    views of a run's are), under ``dt``, the updates and the arrays' memory, so a copy of the
+    observations with another navigation solution computes its own.
+    """
+
+    def __init__(self):
+        self._tables: list = []  # (arrays, dt, update_idx, read-only table); the arrays keep their memory alive
+
+    def table(self, dt, nav, update_idx) -> np.ndarray:
+        """The table of :func:`compute_increments` for ``nav``'s solution at ``update_idx``: a writeable copy."""
+        arrays = (nav.pos, nav.pitch, nav.roll, nav.yaw)
+        update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
+        if not all(_frozen(a) for a in arrays):
+            return compute_increments(dt, *arrays, update_idx)
+        for kept, kept_dt, kept_idx, table in self._tables:
+            if (kept_dt == dt and all(_same_memory(a, b) for a, b in zip(arrays, kept))
+                    and np.array_equal(kept_idx, update_idx)):
+                return table.copy()
+        table = compute_increments(dt, *arrays, update_idx)
+        table.flags.writeable = False
+        self._tables.append((arrays, dt, update_idx.copy(), table))
+        return table.copy()
 
 
 def _memory_owner(arr: np.ndarray) -> np.ndarray | None:

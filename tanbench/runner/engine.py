@@ -35,10 +35,10 @@ from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
 from tanbench.errors import describe_exception
 from tanbench.runner.executors import open_executor, warm_up, warm_up_side_by_side
-from tanbench.runner.plan import (Plan, builtin_methods, check_series_mode, compile_groups, compile_processes,
-                                  compile_seconds, cpu_share_now, make_plan, share_of_each)
+from tanbench.runner.plan import (Plan, builtin_methods, cell_kernels, check_series_mode, compile_groups,
+                                  compile_processes, compile_seconds, cpu_share_now, make_plan, share_of_each)
 from tanbench.runner.resume import ResumeState
-from tanbench.runner.tasks import Task, TaskResult, execute
+from tanbench.runner.tasks import Task, TaskResult, cell_scenario, execute
 from tanbench.runner.validate import check_output, validate_sweep
 from tanbench.schema import METRIC_COLUMNS, rows_table
 from tanbench.simulation import PRELOAD_WORLDS_MAX, noise_free_world
@@ -254,27 +254,38 @@ def filter_variants(todo: list[Task]) -> list[str]:
 
 
 def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note, truth_maps: dict | None = None) -> None:
-    """Compile the kernels of the sweep's methods into numba's on-disk cache, unless it holds them
-    (:func:`tanbench.kernel_cache.is_warm`, the rule of ``plan``'s estimate too), so that
-    the workers only load them (a progress bar at 0 % for a minute would look like a hang).
-    Up to one process per worker (at most the cores) compiles a group of method families side by
-    side (:func:`tanbench.runner.plan.compile_groups`, :func:`executors.warm_up_side_by_side`)."""
-    methods = plan.sweep.spec.methods
-    if kernel_cache.is_warm(builtin_methods(methods)):
+    """Compile the kernels the tasks ``todo`` run into numba's on-disk cache, unless it holds them
+    (:func:`tanbench.kernel_cache.is_warm` of each method in each cell's variant,
+    :func:`tanbench.runner.plan.cell_kernels`: the rule of ``plan``'s estimate too), so that the
+    workers only load them (a progress bar at 0 % for a minute would look like a hang).
+    One cell per distinct ``filter`` block (:func:`filter_variants`) that holds a cold kernel is warmed
+    up: the first with up to one process per worker (at most the cores) compiling a group of the
+    families new to the cache side by side (:func:`tanbench.runner.plan.compile_groups`,
+    :func:`executors.warm_up_side_by_side`), then the others' cold methods in this process."""
+    methods = builtin_methods(plan.sweep.spec.methods)
+    cells = [(cell, cell_kernels(cell_scenario(cell)[0], methods)) for cell in filter_variants(todo)]
+    kernels = list(dict.fromkeys(k for _, names in cells for k in names))
+    cold = set(kernel_cache.cold_methods(kernels))
+    if not cold:
         return
     processes = compile_processes(plan.workers)
-    groups = compile_groups(methods, processes)
+    groups = compile_groups(kernels, processes)
     # the longest group's measured compile time over the share of a core each compiling process will get
-    guess = compile_seconds(methods, processes=processes) / share_of_each(len(groups), cpu_share_now())
+    guess = compile_seconds(kernels, processes=processes) / share_of_each(max(1, len(groups)), cpu_share_now())
     if progress:
         side = f" in {len(groups)} processes" if len(groups) > 1 else ""
         note(f"compiling the numba kernels{side} (once per install or kernel code change; about {guess:.0f} s "
              f"on this machine now)...")
     started = time.perf_counter()
-    first, *others = filter_variants(todo)
-    warm_up_side_by_side(first, groups, truth_maps)
-    for scenario_json in others:  # the other filter settings' kernels (e.g. the Euler step), in this process
-        warm_up(scenario_json, builtin_methods(methods))
+    jobs = [(cell, [kernel_cache.method_of(k) for k in names if k in cold]) for cell, names in cells
+            if cold.intersection(names)]
+    grouped = {m for g in groups for m in g}
+    if groups:  # the families new to the cache
+        warm_up_side_by_side(jobs[0][0], groups, truth_maps)
+    jobs[0] = (jobs[0][0], [m for m in jobs[0][1] if m not in grouped])
+    for cell, cold_methods in jobs:  # the other variants (e.g. the Euler step), in this process
+        if cold_methods:
+            warm_up(cell, cold_methods)
     if progress:
         note(f"compiled in {time.perf_counter() - started:.0f} s; starting the workers")
 

@@ -122,7 +122,8 @@ def warm_up(scenario_json: str | None = None, methods=None) -> None:
     the sweep) sets the terrain and filter options of the tiny run, so a worker warms up
     the kernels the sweep uses (e.g. the ``FastRng`` specialisations) on a map it has been
     given, instead of synthesising the default one. A sweep of three particle filters thus
-    never compiles nor loads the point-mass, marginalized, EKF and TERCOM kernels.
+    never compiles nor loads the point-mass, marginalized, EKF and TERCOM kernels. Marks each
+    method's kernels warm in the cell's variant (:func:`tanbench.runner.plan.cell_kernels`).
     """
     import json
 
@@ -132,6 +133,7 @@ def warm_up(scenario_json: str | None = None, methods=None) -> None:
     from tanbench.config import Scenario
     from tanbench.methods import run_method
     from tanbench.methods.registry import builtin_names
+    from tanbench.runner.plan import cell_kernels
     from tanbench.simulation import simulate_vehicle
 
     builtin = builtin_names()
@@ -145,7 +147,7 @@ def warm_up(scenario_json: str | None = None, methods=None) -> None:
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(0))
     for method in names:
         run_method(scenario, method, vehicle, np.random.SeedSequence(1))
-    kernel_cache.mark_warm(names)
+    kernel_cache.mark_warm(cell_kernels(scenario, names))
 
 
 def warm_up_side_by_side(scenario_json: str | None, groups, truth_maps: dict | None = None) -> None:

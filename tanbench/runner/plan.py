@@ -15,6 +15,8 @@ from pathlib import Path
 
 from tanbench import kernel_cache
 from tanbench.errors import TanbenchError
+from tanbench.filters.posterior import REG_POSTERIOR
+from tanbench.filters.tight import readings_of, tight_resampling_of
 from tanbench.methods.registry import builtin_names, get
 from tanbench.runner.tasks import Task
 from tanbench.sweep import Sweep
@@ -43,6 +45,20 @@ COMPILE_FAMILY_S = {"tight": 41.6, "loose": 23.5, "pmf": 13.5, "mpf": 7.5, "ekf"
 COMPILE_REUSES = {"loose": "tight"}
 COMPILE_ALONE_S = {"loose": 45.0}
 COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
+# another variant of a family's kernels (:func:`kernel_variant`) compiled after one of them (its callees
+# then load from the cache): the jitted loop once more, COMPILE_LOOP_S (also the default variant compiled
+# after another), plus each option's own kernels, COMPILE_OPTION_S (the Euler step and its inputs, the
+# shared resampling kernel, numpy's stream fills). Thread CPU s of one process on a fresh cache, 3 Dec 2026
+# at load average 4.7-8.8 (docs/speed.md, "3 December, sixth session"), each scaled by the process's
+# own ratio to the default family it compiled first (COMPILE_SHARED_S + tight, 47.0 s): the loop 4.7, 4.1
+# and 4.5 s; the Euler step's variant 8.0 and 7.9, the shared kernel's 6.7 and 6.6, numpy's 7.6 (tight)
+# and 8.0 (tight and loose, per family). A variant with several options counts each one's kernels once.
+COMPILE_LOOP_S = 4.4
+COMPILE_OPTION_S = {"euler": 3.5, "shared-resampling": 2.3, "numpy-rng": 3.4}
+COMPILE_OTHER_OPTION_S = 20.0  # an option not measured yet (a guess)
+# a process loading a family's cached kernels (and the simulation's) before it compiles only another variant
+# of it (a cache warmed by another sweep): thread CPU 1.30 and 1.33 s, load average 5.7-5.8, 3 Dec 2026
+COMPILE_LOAD_S = 1.3
 # a helper process starting (spawn, imports: 1.5-1.6 s CPU) and the parent loading the kernels it
 # compiled afterwards (0.1 s), measured 3 Dec 2026
 COMPILE_JOIN_S = 1.7
@@ -71,22 +87,98 @@ def builtin_methods(methods) -> list[str]:
     return [m for m in methods if m in builtin]
 
 
+# the families whose jitted loops draw from filters.rng.loop_rng: its type follows filter.random_numbers
+RNG_FAMILIES = ("tight", "loose")
+
+
+def kernel_variant(method: str, scenario) -> str:
+    """The variant of built-in ``method``'s kernels a cell of ``scenario`` compiles: "" for the default,
+    else the options that give its jitted loop other argument types (numba compiles it once more for
+    each), joined by "+": ``numpy-rng`` (``filter.random_numbers: numpy``:
+    :func:`tanbench.filters.rng.loop_rng` gives the loop numpy's stream), and for the tight loop
+    ``euler`` and ``shared-resampling``, read off the bundles of which
+    :func:`tanbench.filters.tight.tight_filter_loop` passes ``euler_in`` and ``shared_rs`` as None
+    (the Euler step and the shared kernel then compile; tests/test_first_run.py checks the two
+    readings agree). Other options run in branches compiled either way."""
+    family = family_of(method)
+    f = scenario.filter
+    parts = []
+    if family in RNG_FAMILIES and f.random_numbers != "fast":
+        parts.append(f"{f.random_numbers}-rng")
+    if family == "tight":
+        if readings_of(f, scenario.sampling_time_s).propagation != 0:
+            parts.append("euler")
+        if tight_resampling_of(f).kind != REG_POSTERIOR:
+            parts.append("shared-resampling")
+    return "+".join(parts)
+
+
+def cell_kernels(scenario, methods) -> list[str]:
+    """The kernel names (:func:`tanbench.kernel_cache.kernel_name`) a cell of ``scenario`` runs: each
+    built-in method among ``methods`` with its :func:`kernel_variant`."""
+    return [kernel_cache.kernel_name(m, kernel_variant(m, scenario)) for m in builtin_methods(methods)]
+
+
+def sweep_kernels(scenarios, methods) -> list[str]:
+    """The distinct kernel names of cells of these ``scenarios`` (:func:`cell_kernels`), in order of first appearance."""
+    return list(dict.fromkeys(k for scenario in scenarios for k in cell_kernels(scenario, methods)))
+
+
+def _cold_and_warm(kernels, cold) -> tuple[list[str], list[str]]:
+    """The cold built-in ``kernels`` (those ``cold`` names, or else those the cache does not mark warm)
+    and the warm ones (``kernels`` outside ``cold``, or else every kernel the cache marks warm)."""
+    builtin = builtin_names()
+    kernels = [k for k in kernels if kernel_cache.method_of(k) in builtin]
+    if cold is None:
+        return kernel_cache.cold_methods(kernels), kernel_cache.warm_kernels()
+    cold = set(cold)
+    return [k for k in kernels if k in cold], [k for k in kernels if k not in cold]
+
+
 def compile_groups(methods, processes: int = 1, cold=None) -> list[list[str]]:
-    """The cold built-in ``methods`` (:func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names
-    them) in at most ``processes`` groups compiled side by side, one process each: whole families
-    (their methods share kernels), the longest first (``COMPILE_FAMILY_S``), each to the group that
-    ends up shortest with it (:func:`group_compile_s`: a family without the one whose kernels it
-    reuses costs more). The first group, the longest, is the parent's."""
-    cold = kernel_cache.cold_methods(builtin_methods(methods)) if cold is None else builtin_methods(cold)
+    """The methods of the families ``methods`` (kernel names, :func:`cell_kernels`) compile from nothing
+    (a cold kernel, :func:`tanbench.kernel_cache.cold_methods` unless ``cold`` names them, of a family
+    with no warm kernel) in at most ``processes`` groups compiled side by side, one process each: whole
+    families (their methods share kernels), the longest first (``COMPILE_FAMILY_S``), each to the group
+    that ends up shortest with it (:func:`group_compile_s`: a family without the one whose kernels it
+    reuses costs more). The first group, the longest, is the parent's. The other variants of a family
+    compile after (:func:`variant_compile_s`)."""
+    cold, warm = _cold_and_warm(methods, cold)
+    warm_families = {family_of(kernel_cache.method_of(k)) for k in warm}
     families: dict[str, list[str]] = {}
-    for m in cold:
-        families.setdefault(family_of(m), []).append(m)
+    for k in cold:
+        m = kernel_cache.method_of(k)
+        if family_of(m) not in warm_families and m not in families.get(family_of(m), []):
+            families.setdefault(family_of(m), []).append(m)
     groups = [(set(), []) for _ in range(max(1, min(processes, len(families))))]
     for family in sorted(families, key=lambda f: -family_compile_s(f)):
         least = min(groups, key=lambda g: group_compile_s(g[0] | {family}))
         least[0].add(family)
         least[1].extend(families[family])
     return [g[1] for g in sorted(groups, key=lambda g: -group_compile_s(g[0])) if g[1]]
+
+
+def variant_seconds(variant: str) -> float:
+    """Seconds one more ``variant`` of a family's kernels compiles in, after another variant of the family:
+    :data:`COMPILE_LOOP_S` plus each option's :data:`COMPILE_OPTION_S`."""
+    options = variant.split("+") if variant else []
+    return COMPILE_LOOP_S + sum(COMPILE_OPTION_S.get(o, COMPILE_OTHER_OPTION_S) for o in options)
+
+
+def variant_compile_s(methods, cold=None) -> float:
+    """Seconds the variants of ``methods`` (kernel names) take after :func:`compile_groups`' families: each
+    cold (family, variant) pair (no method of the family has the variant warm) costs
+    :func:`variant_seconds`, except the first variant of a family compiled from nothing (its
+    ``COMPILE_FAMILY_S`` counts it)."""
+    cold, warm = _cold_and_warm(methods, cold)
+    warm_pairs = {(family_of(kernel_cache.method_of(k)), kernel_cache.variant_of(k)) for k in warm}
+    fresh = {family_of(m) for g in compile_groups(methods, 1, cold) for m in g}
+    pairs = dict.fromkeys((family_of(kernel_cache.method_of(k)), kernel_cache.variant_of(k)) for k in cold)
+    first = {}
+    for family, variant in pairs:
+        first.setdefault(family, variant)
+    return sum(variant_seconds(v) for f, v in pairs
+               if (f, v) not in warm_pairs and not (f in fresh and first[f] == v))
 
 
 def family_of(method: str) -> str:
@@ -108,17 +200,20 @@ def group_compile_s(families) -> float:
 
 
 def compile_seconds(methods, cold=None, processes: int = 1) -> float:
-    """Seconds numba takes to compile the kernels of ``methods`` (the cold built-in ones,
-    :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this machine idle, with
-    ``processes`` processes compiling groups of families side by side (:func:`compile_groups`): the
-    longest group's families (:func:`group_compile_s`) plus the shared simulation kernels (every
-    process compiles those), plus starting the helpers and loading their kernels afterwards. One
-    process: the sum of all."""
+    """Seconds numba takes to compile the kernels of ``methods`` (kernel names, :func:`cell_kernels`;
+    the cold ones, :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this
+    machine idle, with ``processes`` processes compiling groups of families side by side
+    (:func:`compile_groups`): the longest group's families (:func:`group_compile_s`) plus the shared
+    simulation kernels (every process compiles those), plus starting the helpers and loading their
+    kernels afterwards; then, in the parent, the families' other variants (:func:`variant_compile_s`;
+    with no family to compile, after loading the cached ones, :data:`COMPILE_LOAD_S`).
+    One process: the sum of all."""
     groups = compile_groups(methods, processes, cold)
-    if not groups:
-        return 0.0
+    variants = variant_compile_s(methods, cold)
+    if not groups:  # only variants: the parent loads their families first
+        return COMPILE_LOAD_S + variants if variants else 0.0
     longest = max(group_compile_s({family_of(m) for m in g}) for g in groups)
-    return COMPILE_SHARED_S + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0)
+    return COMPILE_SHARED_S + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0) + variants
 
 
 def size_warning(sweep: Sweep) -> str | None:
@@ -148,6 +243,14 @@ class Plan:
     def task_cost(self, task: Task) -> float:
         return self.costs[task.cell_id]
 
+    def kernels(self, tasks=None) -> list[str]:
+        """The kernel names (:func:`cell_kernels`) of the cells of ``tasks`` (default: what is left to do),
+        in the order ``run`` warms them up (its tasks' order: the costliest cell first)."""
+        tasks = self.todo if tasks is None else tasks
+        cells = {c.cell_id: c.scenario for c in self.sweep.cells}
+        order = dict.fromkeys(t.cell_id for t in sorted(tasks, key=self.task_cost, reverse=True))
+        return sweep_kernels((cells[c] for c in order), self.sweep.spec.methods)
+
     def estimate_seconds(self, tasks=None) -> float:
         """Wall seconds of running ``tasks`` (default: what is left to do), compilation included."""
         return sum(self.estimate_parts(tasks).values())
@@ -156,18 +259,18 @@ class Plan:
         """The estimate in parts: ``compile`` (or loading the cached kernels), ``tasks`` and ``fixed``.
 
         ``load`` is the machine's load average before the sweep starts (default: now) and
-        ``warm`` whether numba's on-disk cache holds the kernels of the sweep's methods
-        (default: looked up per method; False: none of them, True: all).
+        ``warm`` whether numba's on-disk cache holds the kernels the tasks run (:meth:`kernels`;
+        default: looked up per method and variant; False: none of them, True: all).
         """
         tasks = self.todo if tasks is None else tasks
         if not tasks:
             return {"compile": 0.0, "tasks": 0.0, "fixed": 0.0}
         load = current_load() if load is None else load
-        methods = self.sweep.spec.methods
+        kernels = self.kernels(tasks)
         workers = max(1, min(self.workers, len(tasks)))
         cores = default_workers()
         processes = compile_processes(self.workers)
-        compile_s = compile_seconds(methods, None if warm is None else [] if warm else methods, processes=processes)
+        compile_s = compile_seconds(kernels, None if warm is None else [] if warm else kernels, processes=processes)
         share_one = min(1.0, cores / (load + 1))  # the parent alone (validation, tables)
         share_compile = min(1.0, cores / (load + processes))  # the processes compiling side by side
         share_all = min(1.0, cores / (load + workers))  # every worker busy
