@@ -258,6 +258,38 @@ def test_kernel_variant_is_what_the_tight_loop_compiles(monkeypatch):
     assert len(seen) == len(cases)
 
 
+LOOSE_KALMAN = {"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None}
+
+
+def test_kernel_variant_is_the_loop_loose_dvl_runs(monkeypatch):
+    """loose-dvl's kernel variant names the jitted loop it runs (each compiles on its first use): none for
+    the default's (the Kalman feedback with heading offsets), ``loose-kalman`` without the offsets,
+    ``loose-fix-only`` for the paper's architecture; the loop that runs is caught here."""
+    import numpy as np
+
+    from tanbench.config import Scenario
+    from tanbench.methods import loose, method_context
+    from tanbench.simulation import simulate_vehicle
+
+    class Ran(Exception):
+        pass
+
+    for name in ("loose_filter_loop", "loose_kalman_loop", "loose_turned_loop"):
+        monkeypatch.setattr(loose, name, lambda *args, name=name: (_ for _ in ()).throw(Ran(name)))
+    vehicle = simulate_vehicle(Scenario(duration_s=30.0), np.random.SeedSequence(3))
+    cases = [("", {}, "loose_turned_loop"), ("loose-kalman", LOOSE_KALMAN, "loose_kalman_loop"),
+             ("loose-fix-only", {"loose_architecture": "fix-only"}, "loose_filter_loop"),
+             ("numpy-rng+loose-fix-only", {"loose_architecture": "fix-only", "random_numbers": "numpy"},
+              "loose_filter_loop")]
+    for variant, block, loop in cases:
+        scenario = Scenario(duration_s=30.0, filter=block)
+        with pytest.raises(Ran) as ran:
+            loose.run_loose_dvl(method_context(scenario, "loose-dvl", vehicle, np.random.SeedSequence(1)))
+        assert str(ran.value) == loop
+        assert planning.kernel_variant("loose-dvl", scenario) == variant
+        assert planning.kernel_variant("tight-dvl", scenario) == ("numpy-rng" if "numpy" in variant else "")
+
+
 def test_the_estimate_counts_each_variant_a_sweep_compiles(tmp_path, monkeypatch):
     """The compile estimate counts the families compiled from nothing (the first variant of each) plus
     each other (family, variant) pair once (tight-dvl and tight-sbe share theirs), in the parent."""

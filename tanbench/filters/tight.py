@@ -189,6 +189,14 @@ def draw_tight(x, rng, centre_e, centre_n, up, pitch, roll, yaw, prior, half_sid
     _shift_scale(x[BZ], 0.0, prior.std_bias)
 
 
+def loop_options(readings, rs) -> tuple[bool, bool]:
+    """The rare parts the tight loop compiles for these settings (``Readings``, ``Resampling``):
+    (the Euler step, the shared regularisation kernel). :func:`tight_filter_loop` passes their
+    inputs as None otherwise, and ``tanbench.runner.plan.kernel_variant`` names a cell's compiled
+    variant by them."""
+    return readings.propagation != 0, rs.kind != REG_POSTERIOR
+
+
 def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     """Run the filter over all updates; fill the :class:`TightOutputs` ``out``.
 
@@ -218,8 +226,9 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     Euler step nor the shared resampling kernel (docs/speed.md, "Compiling less"); a run that sets
     either compiles the loop once more, with both.
     """
-    euler_in = track.euler_in if settings.readings.propagation != 0 else None
-    shared_rs = settings.rs if settings.rs.kind != REG_POSTERIOR else None
+    euler_step, shared_resampling = loop_options(settings.readings, settings.rs)
+    euler_in = track.euler_in if euler_step else None
+    shared_rs = settings.rs if shared_resampling else None
     _tight_loop(x, rng, track, ranges, beams, grid, settings, out, euler_in, shared_rs)
 
 

@@ -31,6 +31,19 @@ from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
 
+LOOP_TURNED, LOOP_KALMAN, LOOP_FIX_ONLY = "turned", "kalman", "fix-only"
+
+
+def loop_kind(f) -> str:
+    """The jitted loop loose-dvl runs under these filter settings, each compiled on its first use:
+    the Kalman feedback with heading offsets (``turned``, the default), without them (``kalman``),
+    or the paper's fix-only filter (``fix-only``). ``tanbench.runner.plan.kernel_variant`` names a
+    cell's compiled variant by it."""
+    if f.loose_architecture != "kalman-feedback":
+        return LOOP_FIX_ONLY
+    return LOOP_TURNED if f.loose_heading_offsets else LOOP_KALMAN
+
+
 def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     """The loosely coupled position-only particle filter feeding fixes to the navigation system."""
     sc, obs, nav, upd = ctx.scenario, ctx.obs, ctx.nav, ctx.updates.imu
@@ -52,7 +65,7 @@ def run_loose_dvl(ctx: MethodContext) -> MethodOutput:
     k = upd.size
     out_en, var, cov_en = np.empty((k, 2)), np.empty((k, 2)), np.empty(k)
     ess, reinit, fixed = np.empty(k), np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
-    if f.loose_architecture == "kalman-feedback":
+    if loop_kind(f) != LOOP_FIX_ONLY:
         return _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, fixed)
     d0 = np.ascontiguousarray(np.diff(nav.pos[upd, :2], axis=0))
     loose_filter_loop(x, rng, FixOnlyTrack(d0, np.ascontiguousarray(nav.pos[upd, :2]), nav.pos[upd, 2]),
@@ -85,7 +98,7 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     settings = KalmanSettings(model, collapse_resampling_of(f, LOOSE_COLS), divergence_of(f), f.initial_area_m / 2.0,
                               likelihood_of(f), guard_of(f, ctx.nmap), kf)
     outputs = KalmanOutputs(out_en, out_yaw, out_bias, var, var_yaw, ess, reinit, fixed, rejected, healthy)
-    if f.loose_heading_offsets:
+    if loop_kind(f) == LOOP_TURNED:
         _run_turned(ctx, rng, x, inc, settings._replace(rs=collapse_resampling_of(f, LOOSE_TURNED_COLS)), p_kf,
                     outputs)
     else:

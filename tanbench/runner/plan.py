@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from tanbench import kernel_cache
+from tanbench.config import FilterSpec
 from tanbench.errors import TanbenchError
-from tanbench.filters.posterior import REG_POSTERIOR
-from tanbench.filters.tight import readings_of, tight_resampling_of
+from tanbench.filters.tight import loop_options, readings_of, tight_resampling_of
+from tanbench.methods.loose import loop_kind as loose_loop_kind
 from tanbench.methods.registry import builtin_names, get
 from tanbench.runner.tasks import Task
 from tanbench.sweep import Sweep
@@ -54,7 +55,11 @@ COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
 # and 4.5 s; the Euler step's variant 8.0 and 7.9, the shared kernel's 6.7 and 6.6, numpy's 7.6 (tight)
 # and 8.0 (tight and loose, per family). A variant with several options counts each one's kernels once.
 COMPILE_LOOP_S = 4.4
-COMPILE_OPTION_S = {"euler": 3.5, "shared-resampling": 2.3, "numpy-rng": 3.4}
+# loose-dvl's other loops (sixth session, the lead; thread CPU at load average 3.5-4.0, scaled as above by the
+# process's own loose-dvl compiled alone, COMPILE_SHARED_S + COMPILE_ALONE_S = 50.4 s): the first one compiled
+# after the default, fix-only 10.7 s and kalman 12.2 s (one process each), less the loop's COMPILE_LOOP_S; the
+# second after it costs less (3.4 and 6.6 s: they share kernels), which this count overestimates
+COMPILE_OPTION_S = {"euler": 3.5, "shared-resampling": 2.3, "numpy-rng": 3.4, "loose-fix-only": 6.3, "loose-kalman": 7.8}
 COMPILE_OTHER_OPTION_S = 20.0  # an option not measured yet (a guess)
 # a process loading a family's cached kernels (and the simulation's) before it compiles only another variant
 # of it (a cache warmed by another sweep): thread CPU 1.30 and 1.33 s, load average 5.7-5.8, 3 Dec 2026
@@ -96,21 +101,26 @@ def kernel_variant(method: str, scenario) -> str:
     else the options that give its jitted loop other argument types (numba compiles it once more for
     each), joined by "+": ``numpy-rng`` (``filter.random_numbers: numpy``:
     :func:`tanbench.filters.rng.loop_rng` gives the loop numpy's stream), and for the tight loop
-    ``euler`` and ``shared-resampling``, read off the bundles of which
-    :func:`tanbench.filters.tight.tight_filter_loop` passes ``euler_in`` and ``shared_rs`` as None
-    (the Euler step and the shared kernel then compile; tests/test_first_run.py checks the two
-    readings agree). Other options run in branches compiled either way."""
+    ``euler`` and ``shared-resampling``, from :func:`tanbench.filters.tight.loop_options`, which
+    also decides whether :func:`tanbench.filters.tight.tight_filter_loop` passes ``euler_in`` and
+    ``shared_rs`` as None (the Euler step and the shared kernel then compile); for loose-dvl a loop
+    other than the default's, ``loose-kalman`` or ``loose-fix-only``
+    (:func:`tanbench.methods.loose.loop_kind`, which also picks the loop it runs). Other options run
+    in branches compiled either way."""
     family = family_of(method)
     f = scenario.filter
     parts = []
     if family in RNG_FAMILIES and f.random_numbers != "fast":
         parts.append(f"{f.random_numbers}-rng")
     if family == "tight":
-        if readings_of(f, scenario.sampling_time_s).propagation != 0:
-            parts.append("euler")
-        if tight_resampling_of(f).kind != REG_POSTERIOR:
-            parts.append("shared-resampling")
+        euler_step, shared_resampling = loop_options(readings_of(f, scenario.sampling_time_s), tight_resampling_of(f))
+        parts += ["euler"] * euler_step + ["shared-resampling"] * shared_resampling
+    if family == "loose" and loose_loop_kind(f) != DEFAULT_LOOSE_LOOP:
+        parts.append(f"loose-{loose_loop_kind(f)}")
     return "+".join(parts)
+
+
+DEFAULT_LOOSE_LOOP = loose_loop_kind(FilterSpec())
 
 
 def cell_kernels(scenario, methods) -> list[str]:
