@@ -430,6 +430,12 @@ class FilterSpec(_Strict):
                                                    "below tight_min_spread_m [shared: regularisation, min_spread_m]")
     regularisation_bandwidth: float = new_option(
         0.5, gt=0, le=3, description="posterior kernel: factor on the optimal Gaussian kernel width h_opt")
+    single_beam_regularisation_bandwidth: float | None = new_option(
+        None, gt=0, le=3, description="posterior kernel: the bandwidth factor of a tight PF weighted by a single beam "
+                                      "(tight-sbe; docs/filters.md 8) [None: regularisation_bandwidth]")
+    single_beam_ess_threshold: float | None = new_option(
+        None, gt=0, le=1, description="resample a tight PF weighted by a single beam (tight-sbe) when ESS < threshold * N "
+                                      "(docs/filters.md 8) [None: ess_threshold]")
     tight_min_spread_m: float = new_option(
         0.0, ge=0, description="posterior kernel: cloud std below which positions are re-spread (0: never)")
     loose_heading_offsets: bool = new_option(

@@ -242,6 +242,41 @@ def test_regularisation_none_switches_the_posterior_kernel_off_too():
     assert tight_resampling_of(off).kind == REG_NONE
 
 
+def test_single_beam_bandwidth_is_the_single_beam_filters_only():
+    """``filter.single_beam_regularisation_bandwidth`` and ``single_beam_ess_threshold``
+    (docs/filters.md 8) size the posterior kernel and the resampling threshold of a tight PF
+    weighted by one beam; a filter with more beams keeps ``regularisation_bandwidth`` and
+    ``ess_threshold``, and None (the neutral value) keeps them for every filter."""
+    from tanbench.filters.tight import tight_resampling_of
+
+    base = Scenario().filter
+    set_ = base.model_copy(update={"single_beam_regularisation_bandwidth": 0.25, "single_beam_ess_threshold": 0.2})
+    assert tight_resampling_of(set_, 1).size == 0.25
+    assert tight_resampling_of(set_, 1).ess_threshold == 0.2
+    assert tight_resampling_of(set_, 4).size == base.regularisation_bandwidth
+    assert tight_resampling_of(set_, 4).ess_threshold == base.ess_threshold
+    assert tight_resampling_of(base, 1).size == base.regularisation_bandwidth
+    assert tight_resampling_of(base, 1) == tight_resampling_of(base, 4)
+
+
+def test_single_beam_bandwidth_reaches_tight_sbe_and_leaves_tight_dvl_alone():
+    """A run: tight-sbe's numbers move with the single-beam settings, tight-dvl's stay the same bits."""
+    from filters_support import short_scenario
+    from tanbench.methods import run_method
+    from tanbench.simulation import simulate_vehicle
+
+    runs = {}
+    for value in (None, 0.25):
+        sc = short_scenario(duration_s=60.0, particles=300, filter={"single_beam_regularisation_bandwidth": value,
+                                                                     "single_beam_ess_threshold": value})
+        v = simulate_vehicle(sc, np.random.SeedSequence(2424, spawn_key=(0,)))
+        for method, seed in (("tight-sbe", 1), ("tight-dvl", 2)):
+            r = run_method(sc, method, v, np.random.SeedSequence(2425, spawn_key=(0, seed)))
+            runs[method, value] = np.asarray(r.series["est_e"])
+    assert np.array_equal(runs["tight-dvl", None], runs["tight-dvl", 0.25])
+    assert not np.array_equal(runs["tight-sbe", None], runs["tight-sbe", 0.25])
+
+
 # ---- the likelihood's width (docs/filters.md section 7) -------------------------------------------------------
 WIDTH_NEUTRAL = {"range_noise": "table-2", "map_representation": "slope"}
 

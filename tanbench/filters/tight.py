@@ -140,20 +140,34 @@ def tight_prior_of(f) -> TightPrior:
                       f.initial_std_heading_rad, f.initial_std_gyro_bias_deg_h * DEG_PER_H, reinit_area_m / 2.0)
 
 
-def tight_resampling_of(f) -> Resampling:
+def posterior_bandwidth_factor(f, beams: int) -> float:
+    """The posterior kernel's factor on h_opt for a tight PF weighted by ``beams`` beams:
+    ``filter.single_beam_regularisation_bandwidth`` for a single beam when it is set, else
+    ``filter.regularisation_bandwidth`` (docs/filters.md 8)."""
+    if beams == 1 and f.single_beam_regularisation_bandwidth is not None:
+        return float(f.single_beam_regularisation_bandwidth)
+    return float(f.regularisation_bandwidth)
+
+
+def tight_resampling_of(f, beams: int = 4) -> Resampling:
     """The tight filters' Resampling bundle: the shared one, or the posterior-sized kernel
-    (``filter.tight_regularisation``, filters/posterior.py; on the rows of ``filter.regularised_states``).
+    (``filter.tight_regularisation``, filters/posterior.py; on the rows of ``filter.regularised_states``),
+    its bandwidth by the filter's beam count (:func:`posterior_bandwidth_factor`); a single-beam
+    filter resamples below ``filter.single_beam_ess_threshold`` when it is set.
     ``filter.regularisation: none`` switches the jitter off whichever kernel is chosen."""
     rs = collapse_resampling_of(f, REGULARISED_STATES[f.regularised_states])
+    if beams == 1 and f.single_beam_ess_threshold is not None:
+        rs = rs._replace(ess_threshold=float(f.single_beam_ess_threshold))
     if f.tight_regularisation == "posterior" and f.regularisation != "none":
-        rs = rs._replace(kind=REG_POSTERIOR, size=float(f.regularisation_bandwidth), min_spread=f.tight_min_spread_m)
+        rs = rs._replace(kind=REG_POSTERIOR, size=posterior_bandwidth_factor(f, beams), min_spread=f.tight_min_spread_m)
     return rs
 
 
-def tight_settings(scenario, nmap) -> TightSettings:
-    """Every bundle of :func:`tight_filter_loop` from ``scenario`` and its navigation map ``nmap``."""
+def tight_settings(scenario, nmap, beams: int = 4) -> TightSettings:
+    """Every bundle of :func:`tight_filter_loop` from ``scenario`` and its navigation map ``nmap``,
+    for a filter weighted by ``beams`` beams."""
     f = scenario.filter
-    return TightSettings(tight_model_of(scenario), tight_resampling_of(f),
+    return TightSettings(tight_model_of(scenario), tight_resampling_of(f, beams),
                          divergence_of(f), tight_prior_of(f), readings_of(f, scenario.sampling_time_s),
                          likelihood_of(f), guard_of(f, nmap))
 

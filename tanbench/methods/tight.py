@@ -70,7 +70,7 @@ def run_tight(ctx: MethodContext, sensor: str, sonar=None) -> MethodOutput:
     ranges = (obs.dvl_ranges if sensor == "dvl" else obs.sbe_ranges)[ctx.updates.rows]
     if sonar is not None:
         beams, ranges = sonar
-    settings = tight_settings(sc, ctx.nmap)
+    settings = tight_settings(sc, ctx.nmap, beams.shape[0])
     x, rng = tight_start(ctx, settings)
     out = new_tight_outputs(ctx.updates.imu.size)
     tight_filter_loop(x, rng, tight_track(ctx), np.ascontiguousarray(ranges), np.ascontiguousarray(beams),

@@ -1,0 +1,101 @@
+"""Held-out real relief from another DEM (docs/filters.md section 8): windows and sweep files.
+
+Reads matplotlib's sample DEM `jacksboro_fault_dem.npz` (USGS 3 arc-second, Jacksboro fault,
+Tennessee) from the installed matplotlib, cuts four 2400 m windows at fixed fractions of its
+extent at two horizontal scales (J1-J4 the DEM's own spacing, J5-J8 its nodes read as 24 m
+apart), writes each window as an `.npz` in the Map convention (row 0 south) and one sweep file
+per world. Everything after the window (resampling to 8 m, rescaling to -180..-60 m, the 24 m
+map, the survey) is tanbench's own options.
+
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR            # J1-J8
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --second   # J9-J16
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --third    # J17-J24 (40 m second scale)
+    .venv/bin/tanbench run OUT_DIR/J1.yaml --out OUT_DIR/J1 --quiet --series none
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+WINDOW_M = 2400.0
+CENTRES = ((0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75))
+# the second held-out set (docs/filters.md 8.3), fixed after J1-J8 had become development worlds
+SECOND_CENTRES = ((0.5, 0.5), (0.5, 0.15), (0.15, 0.5), (0.85, 0.85))
+# the third (docs/filters.md 8.4), fixed after J9-J16 had become development worlds: other centres, and a 40 m scale
+THIRD_CENTRES = ((0.2, 0.8), (0.8, 0.2), (0.4, 0.6), (0.6, 0.4))
+EARTH_R = 6_371_000.0
+SETS = {  # name -> (first world number, centres, the second scale's node spacing (m), root seeds)
+    "first": (1, CENTRES, 24.0, range(24240011, 24240019)),
+    "second": (9, SECOND_CENTRES, 24.0, range(24240019, 24240027)),
+    "third": (17, THIRD_CENTRES, 40.0, range(24240027, 24240035)),
+}
+
+
+def read_dem() -> tuple[np.ndarray, float, float]:
+    """The DEM with row 0 south, and its node spacing east and north in metres."""
+    import matplotlib.cbook as cbook
+
+    d = np.load(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
+    z = d["elevation"].astype(float)
+    lat_mid = math.radians(0.5 * (float(d["ymin"]) + float(d["ymax"])))
+    dx = math.radians(float(d["dx"])) * EARTH_R * math.cos(lat_mid)
+    dy = math.radians(float(d["dy"])) * EARTH_R
+    # the file's first row is at ymin = 36.733, the northern edge (ymax = 36.446 is south of it)
+    return z[::-1].copy(), dx, dy
+
+
+def window(z: np.ndarray, res_e: float, res_n: float, fe: float, fn: float) -> np.ndarray:
+    """The nodes of a WINDOW_M square centred at fractions (fe, fn) of the grid's extent."""
+    ne = int(round(WINDOW_M / res_e)) + 1
+    nn = int(round(WINDOW_M / res_n)) + 1
+    ce = int(round(fe * (z.shape[1] - 1)))
+    cn = int(round(fn * (z.shape[0] - 1)))
+    e0, n0 = ce - ne // 2, cn - nn // 2
+    return z[n0:n0 + nn, e0:e0 + ne].copy()
+
+
+def sweep(name: str, seed: int, npz: Path, centre: tuple[float, float]) -> dict:
+    return {
+        "name": name,
+        "description": f"held-out real relief {name} (docs/filters.md 8): tight-dvl, tight-sbe, loose-dvl",
+        "seed": seed, "runs": 10, "methods": ["tight-dvl", "tight-sbe", "loose-dvl"],
+        "scenario": {
+            "terrain": {"kind": "file", "path": str(npz), "resample_m": 8, "depth_range_m": [-180, -60]},
+            "area": "custom",
+            "trajectory": {"kind": "survey", "centre_en_m": list(centre), "heading_deg": 0.0,
+                           "leg_length_m": 1400.0, "leg_spacing_m": 250.0, "legs": 3, "depth_m": 20.0},
+            "map_resolution_m": 24, "noise_m": 1.0, "sampling_time_s": 1, "particles": 2000,
+        },
+    }
+
+
+def main(out: Path, which: str = "first") -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    z, dx, dy = read_dem()
+    first, centres, spacing, seed_range = SETS[which]
+    scales = ((dx, dy), (spacing, spacing))
+    seeds = iter(seed_range)
+    k = first - 1
+    for res_e, res_n in scales:
+        for fe, fn in centres:
+            k += 1
+            name = f"J{k}"
+            w = window(z, res_e, res_n, fe, fn)
+            npz = out / f"{name}.npz"
+            np.savez(npz, z=w, e0=0.0, n0=0.0, res_e=res_e, res_n=res_n)
+            centre = (0.5 * (w.shape[1] - 1) * res_e, 0.5 * (w.shape[0] - 1) * res_n)
+            (out / f"{name}.yaml").write_text(yaml.safe_dump(sweep(name, next(seeds), npz.resolve(), centre),
+                                                             sort_keys=False))
+            print(f"{name}: {w.shape[1]} x {w.shape[0]} nodes at {res_e:.1f} x {res_n:.1f} m, "
+                  f"relief {w.max() - w.min():.0f} m before rescaling, survey centre {centre[0]:.0f}, {centre[1]:.0f}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) not in (2, 3) or (len(sys.argv) == 3 and sys.argv[2] not in ("--second", "--third")):
+        raise SystemExit(__doc__)
+    main(Path(sys.argv[1]), sys.argv[2][2:] if len(sys.argv) == 3 else "first")
