@@ -297,8 +297,13 @@ def update_track(scenario, truth, ping_idx: np.ndarray, ranges) -> TrueTrack:
 def bound_series(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, scenario, states: str,
                  sensor: str = "dvl") -> pd.DataFrame:
     """The PCRB series (t, ``BOUND_COLUMNS``) along ``tracks`` for the filter of ``scenario`` (``states``)
-    weighing by ``sensor``'s beams."""
-    return bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model_for(scenario, states, sensor)))
+    weighing by ``sensor``'s beams, and beside it the second bound's horizontal std (``MAP_BOUND_COLUMN``:
+    the beams' variances with the map's that the filter of ``scenario`` charges on ``nav_map``)."""
+    model = model_for(scenario, states, sensor)
+    out = bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model))
+    with_map = bound(tracks, beams_body, nav_map, model, map_variance_grid(scenario, nav_map))
+    out[MAP_BOUND_COLUMN] = bound_frame(tracks[0].t, with_map)["pcrb_horizontal_m"]
+    return out
 
 
 def method_bound(scenario, bound: tuple[str, str] | None) -> pd.DataFrame | None:
@@ -314,8 +319,5 @@ def method_bound(scenario, bound: tuple[str, str] | None) -> pd.DataFrame | None
 def _bound_cached(scenario_json: str, sensor: str, states: str) -> pd.DataFrame:
     scenario = Scenario(**json.loads(scenario_json))
     tracks, beams = true_tracks(scenario, sensor)
-    nav_map = navigation_map(scenario.terrain, scenario.map_resolution_m)
-    out = bound_series(tracks, beams, nav_map, scenario, states, sensor)
-    with_map = bound(tracks, beams, nav_map, model_for(scenario, states, sensor), map_variance_grid(scenario, nav_map))
-    out[MAP_BOUND_COLUMN] = bound_frame(tracks[0].t, with_map)["pcrb_horizontal_m"]
-    return out
+    return bound_series(tracks, beams, navigation_map(scenario.terrain, scenario.map_resolution_m), scenario, states,
+                        sensor)
