@@ -337,8 +337,9 @@ def compact_cells(out: Path, cell_ids, kept: dict | None = None) -> None:
         table = pa.concat_tables([t.replace_schema_metadata(None) for t in tables], promote_options="default")
         df = table.to_pandas().drop_duplicates(subset=["method", "run"], keep="last")
         df = df.sort_values(["run", "method"], kind="stable").reset_index(drop=True)
-        write_table(pa.Table.from_pandas(df, schema=tables[-1].schema.remove_metadata(), preserve_index=False),
-                    merged_path, meta)
+        # the sources' unified schema (the same as each one's when they agree): a file written before a
+        # metric existed, merged after files that have it, reads as null there instead of dropping the column
+        write_table(pa.Table.from_pandas(df, schema=table.schema, preserve_index=False), merged_path, meta)
         for p in parts:
             p.unlink(missing_ok=True)
 

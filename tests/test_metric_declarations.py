@@ -24,7 +24,8 @@ def _run(err_h) -> RunScore:
                     wall=0.1, conv_time=np.nan, rmse=np.nan, recovery=(0, np.nan, np.nan),
                     consistency={k: np.nan for k in ("nees_mean_after_convergence", "nees_above_95", "nees_below_95",
                                                      "pcrb_after_convergence_m", "rmse_pcrb_ratio",
-                                                     "nees_mean_whole_run", "reported_std_below_bound")})
+                                                     "nees_mean_whole_run", "reported_std_below_bound",
+                                                     "pcrb_map_after_convergence_m", "rmse_pcrb_map_ratio")})
 
 
 def test_lost_time_fraction_is_the_share_of_updates_beyond_the_divergence_threshold():

@@ -33,6 +33,13 @@ Carlo average of J_z (and of F) over the runs' true trajectories; tanbench's tru
 trajectory is fixed by the world (not by the run's seed), so in every committed sweep
 this average is exact with one trajectory.
 
+A second bound, reported beside this one and never replacing it (``MAP_BOUND_COLUMN``,
+docs/model.md 9.1): the same recursion with each beam's variance sigma_r^2 + m(p_i), m the
+navigation map's variance grid that the filters' map-aware likelihood charges
+(``terrain.representation.filter_map_variance``: the representation term plus the map's
+declared node error) at the true footprint, NaN (off the grid) taken as 0. It treats the
+map's error as independent between pings, which it is not, so it is still optimistic.
+
 Prior: the filter's initial square of side ``filter.initial_area_m`` is uniform; its
 variance side^2/12 is used (a uniform prior, too, has no regular Fisher information),
 with Gaussians of the filter's initial heading and gyro-bias std.
@@ -59,6 +66,7 @@ from tanbench.sensors.multibeam import sensor_fan
 from tanbench.simulation import noise_free_swath, noise_free_world
 from tanbench.terrain import navigation_map
 from tanbench.terrain.grid import Map
+from tanbench.terrain.representation import filter_map_variance
 from tanbench.terrain.stats import gradient
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -67,6 +75,9 @@ STATE_SETS = {"position": ("E", "N"), "full": ("E", "N", "psi", "eps_x", "eps_z"
 
 # the per-update columns of a bound (what ``bound_frame`` returns besides t)
 BOUND_COLUMNS = ("pcrb_e_m", "pcrb_n_m", "pcrb_horizontal_m", "pcrb_heading_deg")
+# the horizontal std of the second bound, with the map's declared error in each beam's variance
+# (what ``method_bound`` adds to ``BOUND_COLUMNS``; scoring reads it, no method sees it)
+MAP_BOUND_COLUMN = "pcrb_map_horizontal_m"
 
 
 @dataclass(frozen=True)
@@ -146,13 +157,17 @@ def range_sensitivities(grad_e, grad_n, beam_nav, ranges) -> np.ndarray:
     return np.where(np.isfinite(out), out, 0.0)
 
 
-def ping_information(sens: np.ndarray, range_std_m: float, d: int) -> np.ndarray:
+def ping_information(sens: np.ndarray, range_std_m: float, d: int, weights: np.ndarray | None = None) -> np.ndarray:
     """Fisher information (..., d, d) of one ping: sum over beams (axis -2) of s s^T / sigma_r^2.
 
     ``sens`` (..., m, 3) from :func:`range_sensitivities`; d = 2 keeps (E, N), d >= 3 adds psi
-    (and zero rows for the gyro biases, which no ping observes directly).
+    (and zero rows for the gyro biases, which no ping observes directly). ``weights`` (..., m):
+    each beam's sigma_r^2 / (its variance), in (0, 1] (None: the range noise alone); a weight
+    of exactly 1 gives the same bits as None.
     """
     s = sens[..., : min(d, 3)]
+    if weights is not None:
+        s = s * np.sqrt(weights)[..., None]
     info = np.einsum("...bi,...bj->...ij", s, s) / range_std_m**2
     if d > 3:
         pad = np.zeros(info.shape[:-2] + (d, d))
@@ -161,14 +176,27 @@ def ping_information(sens: np.ndarray, range_std_m: float, d: int) -> np.ndarray
     return info
 
 
-def track_information(track: TrueTrack, beams_body: np.ndarray, nav_map: Map, model: BoundModel) -> np.ndarray:
-    """J_z(k) (K, d, d) along one true track on ``nav_map``."""
+def track_information(track: TrueTrack, beams_body: np.ndarray, nav_map: Map, model: BoundModel,
+                      map_variance: Map | None = None) -> np.ndarray:
+    """J_z(k) (K, d, d) along one true track on ``nav_map``; with ``map_variance`` (a grid of m(p) on
+    the map's nodes, :func:`map_variance_grid`), each beam's variance is sigma_r^2 + m(p_i) at its
+    true footprint (NaN, off the grid: 0)."""
     c = dcm_body_to_nav_numpy(track.pitch, track.roll, track.yaw)  # (K, 3, 3)
     b_nav = np.einsum("kij,bj->kbi", c, beams_body)  # (K, m, 3)
     foot = track.pos[:, None, :] + track.ranges[..., None] * b_nav
     ge, gn = gradient(nav_map, foot[..., 0], foot[..., 1])
     sens = range_sensitivities(ge, gn, b_nav, track.ranges)
-    return ping_information(sens, model.range_std_m, len(model.state_names))
+    weights = None
+    if map_variance is not None:
+        r2 = model.range_std_m**2
+        weights = r2 / (r2 + np.nan_to_num(map_variance.elevation(foot[..., 0], foot[..., 1]), nan=0.0))
+    return ping_information(sens, model.range_std_m, len(model.state_names), weights)
+
+
+def map_variance_grid(scenario, nav_map: Map) -> Map:
+    """The variance m(p) the filters' map-aware likelihood charges on ``nav_map`` under ``scenario``'s filter
+    (``terrain.representation.filter_map_variance``), as a grid on the map's nodes."""
+    return Map(filter_map_variance(scenario.filter, nav_map), nav_map.e0, nav_map.n0, nav_map.res_e, nav_map.res_n)
 
 
 def transition(increments: np.ndarray, model: BoundModel) -> tuple[np.ndarray, np.ndarray]:
@@ -210,12 +238,14 @@ def pcrb_recursion(prior_info: np.ndarray, F: np.ndarray, Q: np.ndarray, meas_in
     return out
 
 
-def bound(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, model: BoundModel) -> np.ndarray:
-    """PCRB covariances (K, d, d): J_z and F averaged over ``tracks`` (the Monte Carlo expectation)."""
+def bound(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, model: BoundModel,
+          map_variance: Map | None = None) -> np.ndarray:
+    """PCRB covariances (K, d, d): J_z and F averaged over ``tracks`` (the Monte Carlo expectation);
+    with ``map_variance``, the second bound (beam variances with the map's, :func:`track_information`)."""
     if model.range_std_m <= 0:
         d = len(model.state_names)  # noise-free ranges: the bound is not defined (infinite information)
         return np.full((tracks[0].t.size, d, d), np.nan)
-    info = np.mean([track_information(tr, beams_body, nav_map, model) for tr in tracks], axis=0)
+    info = np.mean([track_information(tr, beams_body, nav_map, model, map_variance) for tr in tracks], axis=0)
     fq = [transition(tr.increments, model) for tr in tracks]
     F = np.mean([f for f, _ in fq], axis=0)
     Q = np.mean([q for _, q in fq], axis=0)
@@ -267,13 +297,19 @@ def update_track(scenario, truth, ping_idx: np.ndarray, ranges) -> TrueTrack:
 def bound_series(tracks: list[TrueTrack], beams_body: np.ndarray, nav_map: Map, scenario, states: str,
                  sensor: str = "dvl") -> pd.DataFrame:
     """The PCRB series (t, ``BOUND_COLUMNS``) along ``tracks`` for the filter of ``scenario`` (``states``)
-    weighing by ``sensor``'s beams."""
-    return bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model_for(scenario, states, sensor)))
+    weighing by ``sensor``'s beams, and beside it the second bound's horizontal std (``MAP_BOUND_COLUMN``:
+    the beams' variances with the map's that the filter of ``scenario`` charges on ``nav_map``)."""
+    model = model_for(scenario, states, sensor)
+    out = bound_frame(tracks[0].t, bound(tracks, beams_body, nav_map, model))
+    with_map = bound(tracks, beams_body, nav_map, model, map_variance_grid(scenario, nav_map))
+    out[MAP_BOUND_COLUMN] = bound_frame(tracks[0].t, with_map)["pcrb_horizontal_m"]
+    return out
 
 
 def method_bound(scenario, bound: tuple[str, str] | None) -> pd.DataFrame | None:
-    """The PCRB series (t, ``BOUND_COLUMNS``) of a method in ``scenario``; ``bound`` is its
-    registry record's (sensor, states), handed down by the caller (None: no bound)."""
+    """The PCRB series (t, ``BOUND_COLUMNS``, then ``MAP_BOUND_COLUMN``: the second bound's horizontal std)
+    of a method in ``scenario``; ``bound`` is its registry record's (sensor, states), handed down by the
+    caller (None: no bound)."""
     if bound is None:
         return None
     return _bound_cached(json.dumps(scenario.normalized(), sort_keys=True), *bound).copy()

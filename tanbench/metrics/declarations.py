@@ -110,6 +110,15 @@ METRICS: tuple[Metric, ...] = (
            lambda r: _f(np.mean(r.err_h > r.filter.divergence_threshold_m)),
            "fraction of the run's updates with horizontal error above filter.divergence_threshold_m",
            summary="mean"),
+    # the second bound, beside the first (issue 24, docs/model.md 9.1): each beam's variance is the range
+    # noise's plus the navigation map's declared error at its footprint; the counted ratio stays rmse_pcrb_ratio
+    Metric("pcrb_map_after_convergence_m", pa.float64(), lambda r: r.consistency["pcrb_map_after_convergence_m"],
+           "RMS after the run's convergence of the cell's second bound, the PCRB whose beams also carry the "
+           "navigation map's declared error (representation and node error, docs/model.md 9.1), m; not the "
+           "counted bound (pcrb_after_convergence_m)"),
+    Metric("rmse_pcrb_map_ratio", pa.float64(), lambda r: r.consistency["rmse_pcrb_map_ratio"],
+           "RMSE after convergence / the bound that includes the map's declared error "
+           "(pcrb_map_after_convergence_m); the counted ratio is rmse_pcrb_ratio"),
 )
 
 BY_NAME = {m.name: m for m in METRICS}
