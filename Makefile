@@ -6,7 +6,7 @@ TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
 PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d))) $(if $(wildcard results/zhou2017-fitted/sweep.yaml),--fitted results/zhou2017-fitted)
 
-.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism multibeam criterion seafloors literal-family fitted check-numpy scaling clean
+.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism heldout-relief multibeam criterion seafloors literal-family fitted check-numpy scaling clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -146,6 +146,17 @@ monterey: $(VENV)/.installed-run
 realism: $(VENV)/.installed-run
 	rm -rf results/realism
 	$(TB) run configs/realism.yaml --out results/realism --quiet --series none
+
+## heldout-relief: issue 24's real-relief targets on held-out relief (docs/filters.md section 8): 24 windows of
+## matplotlib's Jacksboro sample DEM (built under .cache/heldout-relief, never committed), tight-dvl, tight-sbe and
+## loose-dvl at the recommended defaults, 10 runs each, into results/heldout-relief with SUMMARY.md
+heldout-relief: $(VENV)/.installed-run
+	rm -rf results/heldout-relief .cache/heldout-relief
+	$(BIN)/python examples/prototypes/heldout_relief.py .cache/heldout-relief --all
+	for f in .cache/heldout-relief/J*.yaml; do \
+		$(TB) run $$f --out results/heldout-relief/$$(basename $$f .yaml) --quiet --series none --workers 2 || exit 1; \
+	done
+	$(BIN)/python examples/prototypes/heldout_relief.py --summary results/heldout-relief > results/heldout-relief/SUMMARY.md
 
 ## multibeam: accuracy and cost against the multibeam's beam count and swath angle (tight-mbe, pmf-mbe, tight-dvl) on
 ## areas A, B and Monterey into results/multibeam (summary series): tables, the accuracy-cost figure and the

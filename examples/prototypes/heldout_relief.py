@@ -10,7 +10,12 @@ map, the survey) is tanbench's own options.
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR            # J1-J8
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --second   # J9-J16
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --third    # J17-J24 (40 m second scale)
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --all      # J1-J24
     .venv/bin/tanbench run OUT_DIR/J1.yaml --out OUT_DIR/J1 --quiet --series none
+    .venv/bin/python examples/prototypes/heldout_relief.py --summary RESULTS_DIR   # a table of RESULTS_DIR/J*/
+
+`make heldout-relief` does all of it (worlds under .cache/heldout-relief, runs under
+results/heldout-relief, the table in its SUMMARY.md).
 """
 
 from __future__ import annotations
@@ -95,7 +100,53 @@ def main(out: Path, which: str = "first") -> None:
                   f"relief {w.max() - w.min():.0f} m before rescaling, survey centre {centre[0]:.0f}, {centre[1]:.0f}")
 
 
+# issue 24's targets on real relief (docs/filters.md 6.1 item 3): most lost runs of 10 per method, largest final error
+TARGETS = {"tight-dvl": 0, "tight-sbe": 1, "loose-dvl": 2}
+MAX_FINAL_M = 200.0
+
+
+def summary(results: Path) -> str:
+    """A Markdown table of every world's run table under ``results`` (J*/): lost runs and the largest
+    final error per method, each cell marked where it misses issue 24's target."""
+    import pandas as pd
+
+    worlds = sorted((d for d in results.glob("J*") if d.name[1:].isdigit() and (d / "runs").is_dir()),
+                    key=lambda d: int(d.name[1:]))
+    if not worlds:
+        raise SystemExit(f"no world results (J*/runs) under {results}")
+    rows, misses = [], {}
+    methods = list(TARGETS)
+    for d in worlds:
+        df = pd.concat([pd.read_parquet(f) for f in sorted((d / "runs").rglob("*.parquet"))])
+        cells = []
+        for m in methods:
+            g = df[df["method"] == m]
+            if g.empty:
+                cells.append("-")
+                continue
+            lost, worst = int(g["diverged"].sum()), float(g["final_horizontal_error_m"].max())
+            miss = lost > TARGETS[m] or worst > MAX_FINAL_M
+            misses[m] = misses.get(m, 0) + int(miss)
+            cells.append(f"{'**' if miss else ''}{lost} of {len(g)} ({worst:.1f} m){'**' if miss else ''}")
+        rows.append(f"| {d.name} | " + " | ".join(cells) + " |")
+    head = ["# Held-out real relief (docs/filters.md section 8; `make heldout-relief`)", "",
+            "Lost runs (final error above 75 m) and the largest final error per world and method; in bold where "
+            f"issue 24's target is missed (at most {', '.join(f'{m} {k}' for m, k in TARGETS.items())} lost, no final "
+            f"error above {MAX_FINAL_M:g} m).", "",
+            "| world | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
+    tail = ["", "Worlds missing the target: " + ", ".join(f"{m} {misses.get(m, 0)} of {len(worlds)}" for m in methods)
+            + "."]
+    return "\n".join(head + rows + tail) + "\n"
+
+
 if __name__ == "__main__":
-    if len(sys.argv) not in (2, 3) or (len(sys.argv) == 3 and sys.argv[2] not in ("--second", "--third")):
+    args = sys.argv[1:]
+    if len(args) == 2 and args[0] == "--summary":
+        print(summary(Path(args[1])), end="")
+    elif len(args) == 2 and args[1] == "--all":
+        for which in SETS:
+            main(Path(args[0]), which)
+    elif len(args) in (1, 2) and (len(args) == 1 or args[1] in ("--second", "--third")):
+        main(Path(args[0]), args[1][2:] if len(args) == 2 else "first")
+    else:
         raise SystemExit(__doc__)
-    main(Path(sys.argv[1]), sys.argv[2][2:] if len(sys.argv) == 3 else "first")
