@@ -64,7 +64,17 @@ def window(z: np.ndarray, res_e: float, res_n: float, fe: float, fn: float) -> n
     return z[n0:n0 + nn, e0:e0 + ne].copy()
 
 
-def sweep(name: str, seed: int, npz: Path, centre: tuple[float, float]) -> dict:
+def sweep_path(npz: Path) -> str:
+    """The window's path as its sweep file names it: relative to the working directory (where tanbench
+    runs) when the window lies below it, so that the cell keys, and with them the seeds, do not depend
+    on where the project is checked out; absolute otherwise."""
+    try:
+        return str(npz.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(npz.resolve())
+
+
+def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) -> dict:
     return {
         "name": name,
         "description": f"held-out real relief {name} (docs/filters.md 8): tight-dvl, tight-sbe, loose-dvl",
@@ -94,7 +104,7 @@ def main(out: Path, which: str = "first") -> None:
             npz = out / f"{name}.npz"
             np.savez(npz, z=w, e0=0.0, n0=0.0, res_e=res_e, res_n=res_n)
             centre = (0.5 * (w.shape[1] - 1) * res_e, 0.5 * (w.shape[0] - 1) * res_n)
-            (out / f"{name}.yaml").write_text(yaml.safe_dump(sweep(name, next(seeds), npz.resolve(), centre),
+            (out / f"{name}.yaml").write_text(yaml.safe_dump(sweep(name, next(seeds), sweep_path(npz), centre),
                                                              sort_keys=False))
             print(f"{name}: {w.shape[1]} x {w.shape[0]} nodes at {res_e:.1f} x {res_n:.1f} m, "
                   f"relief {w.max() - w.min():.0f} m before rescaling, survey centre {centre[0]:.0f}, {centre[1]:.0f}")
