@@ -34,7 +34,8 @@ def test_plan_estimate_includes_compilation_and_the_load():
         assert side == pytest.approx(planning.COMPILE_SHARED_S + planning.COMPILE_JOIN_S + max(
             planning.COMPILE_FAMILY_S["tight"], planning.COMPILE_ALONE_S["loose"]))
     share_compile = min(1.0, cores / processes)
-    assert idle["compile"] == pytest.approx(side / share_compile + planning.WARM_START_S / share_all)
+    speed = planning.machine_speed_factor()  # this machine's core against the constants' (measured once)
+    assert idle["compile"] == pytest.approx(side * speed / share_compile + planning.WARM_START_S / share_all)
     assert idle["tasks"] == pytest.approx(tasks / (workers * share_all))
     assert idle["fixed"] == pytest.approx(planning.FIXED_S / share_one)
     warm = plan.estimate_parts(load=0.0, warm=True)
@@ -43,6 +44,24 @@ def test_plan_estimate_includes_compilation_and_the_load():
     assert busy["tasks"] == pytest.approx(tasks / (workers * min(1.0, cores / (8.0 + workers))))
     assert busy["compile"] > idle["compile"] and busy["fixed"] > idle["fixed"]
     assert plan.estimate_seconds() == pytest.approx(sum(plan.estimate_parts().values()), rel=0.5)
+
+
+def test_the_compile_estimate_follows_the_machine_speed(monkeypatch):
+    """The compile part of the estimate is the constants times the machine-speed factor (docs/speed.md,
+    seventh session): a core twice as slow doubles it, nothing else moves; the factor is measured once per
+    process and kept within [0.25, 4]."""
+    factor = planning.machine_speed_factor()
+    assert 0.25 <= factor <= 4.0 and planning.machine_speed_factor() == factor
+    sweep = load_sweep(ROOT / "configs" / "quick.yaml")
+    plan = planning.make_plan(sweep, Path("/nonexistent/results"), workers=2)
+    monkeypatch.setattr(planning, "machine_speed_factor", lambda: 1.0)
+    one = plan.estimate_parts(load=0.0, warm=False)
+    monkeypatch.setattr(planning, "machine_speed_factor", lambda: 2.0)
+    two = plan.estimate_parts(load=0.0, warm=False)
+    start = planning.WARM_START_S / min(1.0, planning.default_workers() / min(2, len(plan.tasks)))
+    assert two["compile"] - start == pytest.approx(2 * (one["compile"] - start))
+    assert (two["tasks"], two["fixed"]) == (one["tasks"], one["fixed"])
+    assert plan.estimate_parts(load=0.0, warm=True)["compile"] == pytest.approx(start)  # nothing to compile
 
 
 def test_warm_up_compiles_and_marks_only_the_sweeps_methods(tmp_path, monkeypatch):
@@ -316,7 +335,7 @@ def test_the_estimate_counts_each_variant_a_sweep_compiles(tmp_path, monkeypatch
     assert plan.kernels(plan.tasks[:1]) == ["tight-dvl"]
     monkeypatch.setattr(planning, "default_workers", lambda: 2)
     idle = plan.estimate_parts(load=0.0, warm=False)
-    assert idle["compile"] == pytest.approx(tight + euler + planning.WARM_START_S)
+    assert idle["compile"] == pytest.approx((tight + euler) * planning.machine_speed_factor() + planning.WARM_START_S)
     assert plan.estimate_parts(load=0.0)["compile"] == pytest.approx(idle["compile"])  # the empty cache: all cold
 
 

@@ -6,8 +6,10 @@ once per cell (``tanbench plan`` of a 10,000-cell grid answers in seconds).
 
 from __future__ import annotations
 
+import functools
 import heapq
 import json
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -281,6 +283,7 @@ class Plan:
         cores = default_workers()
         processes = compile_processes(self.workers)
         compile_s = compile_seconds(kernels, None if warm is None else [] if warm else kernels, processes=processes)
+        compile_s *= machine_speed_factor() if compile_s > 0 else 1.0
         share_one = min(1.0, cores / (load + 1))  # the parent alone (validation, tables)
         share_compile = min(1.0, cores / (load + processes))  # the processes compiling side by side
         share_all = min(1.0, cores / (load + workers))  # every worker busy
@@ -327,6 +330,37 @@ def longest_first_makespan(costs, workers: int) -> float:
     for cost in sorted(costs, reverse=True):
         heapq.heappush(loads, heapq.heappop(loads) + cost)
     return max(loads) if costs else 0.0
+
+
+# How fast this machine's core is against the one the COMPILE_* constants were measured on (docs/speed.md,
+# "seventh session"): the least thread CPU of three rounds of a fixed pure-Python workload (dicts, tuples, strings,
+# the kind of work numba's typing and lowering do), over SPEED_REFERENCE_S. The reference was set once, from
+# three cold compiles of configs/quick.yaml on the 3 December 2026 VM (an AMD EPYC with AVX-512; 28, 29 and 34 s
+# against the constants' 52.1 s): that VM's probe time, 0.025 s (the median of 6), over 29 / 52.1.
+SPEED_PROBE_ITEMS = 60_000
+SPEED_REFERENCE_S = 0.0449
+
+
+def _speed_probe_work(items: int) -> int:
+    total = 0
+    for i in range(items):
+        d = {"a": i, "b": (i, i + 1), "c": [i] * 3}
+        total += len(d["c"]) + d["b"][1] - d["a"] + len(f"v{i}")
+    return total
+
+
+@functools.lru_cache(maxsize=1)
+def machine_speed_factor() -> float:
+    """This machine's compile seconds per second of the COMPILE_* constants' machine, measured once per
+    process (about 0.1 s): the probe's least thread CPU time of three rounds over ``SPEED_REFERENCE_S``,
+    kept within [0.25, 4]. Thread CPU, so it reads how fast a core is, not how much of one we get
+    (that is :func:`cpu_share_now`)."""
+    best = math.inf
+    for _ in range(3):
+        t0 = time.thread_time()
+        _speed_probe_work(SPEED_PROBE_ITEMS)
+        best = min(best, time.thread_time() - t0)
+    return max(0.25, min(4.0, best / SPEED_REFERENCE_S))
 
 
 def cpu_share_now(probe_s: float = 0.25) -> float:
