@@ -115,6 +115,23 @@ def test_share_of_each_compiling_process(monkeypatch):
     assert planning.share_of_each(1, 0.5) == pytest.approx(0.5)
     assert planning.share_of_each(2, 0.5) == pytest.approx(2 / 5)  # 3 others + 2 of ours on 2 cores
     assert planning.share_of_each(3, 1.0) == pytest.approx(2 / 3)
+    # measured other load wins over the one the share implies: one busy process beside a whole-core probe
+    assert planning.share_of_each(2, 1.0, others=1.0) == pytest.approx(2 / 3)
+    assert planning.share_of_each(2, 0.5, others=0.0) == 1.0
+
+
+def test_the_load_probe_reads_proc_stat(monkeypatch, tmp_path):
+    """``busy_jiffies`` counts user, system, interrupts and steal as busy and niced time as free; the probe
+    returns its share and the other busy cores, or None for them where /proc/stat cannot be read."""
+    stat = tmp_path / "stat"
+    stat.write_text("cpu  100 50 20 800 10 5 5 10 0 0\ncpu0 1 2 3\n")
+    real_path = planning.Path
+    monkeypatch.setattr(planning, "Path", lambda p: stat if p == "/proc/stat" else real_path(p))
+    assert planning.busy_jiffies() == (100 + 20 + 5 + 5 + 10, 100 + 20 + 5 + 5 + 10 + 50 + 800 + 10)
+    share, others = planning.cpu_load_now(0.02)
+    assert 0.0 < share <= 1.0 and others is None  # the same ticks before and after: no interval to read
+    monkeypatch.setattr(planning, "Path", lambda p: tmp_path / "missing" if p == "/proc/stat" else real_path(p))
+    assert planning.busy_jiffies() is None
 
 
 def test_side_by_side_warm_up_of_one_group_stays_in_this_process(monkeypatch):
@@ -227,7 +244,7 @@ def _compile_plan(methods=("tight-dvl",), workers=1):
 
 def _record_warm_ups(monkeypatch, engine):
     calls = []
-    monkeypatch.setattr(engine, "cpu_share_now", lambda: 1.0)
+    monkeypatch.setattr(engine, "cpu_load_now", lambda: (1.0, 0.0))
     monkeypatch.setattr(engine, "warm_up_side_by_side", lambda s, groups, maps: calls.append(("side", s, groups)))
     monkeypatch.setattr(engine, "warm_up", lambda s, methods: calls.append(("here", s, tuple(methods))))
     return calls

@@ -36,7 +36,7 @@ from tanbench.config import flatten
 from tanbench.errors import describe_exception
 from tanbench.runner.executors import open_executor, warm_up, warm_up_side_by_side
 from tanbench.runner.plan import (Plan, builtin_methods, cell_kernels, check_series_mode, compile_groups,
-                                  compile_processes, compile_seconds, cpu_share_now, machine_speed_factor, make_plan,
+                                  compile_processes, compile_seconds, cpu_load_now, machine_speed_factor, make_plan,
                                   share_of_each)
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import Task, TaskResult, cell_scenario, execute
@@ -274,7 +274,7 @@ def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note, truth_ma
     # the longest group's measured compile time, scaled to this machine's core, over the share of a core each
     # compiling process will get
     guess = (compile_seconds(kernels, processes=processes) * machine_speed_factor()
-             / share_of_each(max(1, len(groups)), cpu_share_now()))
+             / share_of_each(max(1, len(groups)), *cpu_load_now()))
     if progress:
         side = f" in {len(groups)} processes" if len(groups) > 1 else ""
         note(f"compiling the numba kernels{side} (once per install or kernel code change; about {guess:.0f} s "

@@ -333,7 +333,7 @@ def longest_first_makespan(costs, workers: int) -> float:
 
 
 # How fast this machine's core is against the one the COMPILE_* constants were measured on (docs/speed.md,
-# "seventh session"): the least thread CPU of three rounds of a fixed pure-Python workload (dicts, tuples, strings,
+# "seventh session"): the least thread CPU of seven rounds of a fixed pure-Python workload (dicts, tuples, strings,
 # the kind of work numba's typing and lowering do), over SPEED_REFERENCE_S. The reference was set once, from
 # three cold compiles of configs/quick.yaml on the 3 December 2026 VM (an AMD EPYC with AVX-512; 28, 29 and 34 s
 # against the constants' 52.1 s): that VM's probe time, 0.025 s (the median of 6), over 29 / 52.1.
@@ -352,25 +352,49 @@ def _speed_probe_work(items: int) -> int:
 @functools.lru_cache(maxsize=1)
 def machine_speed_factor() -> float:
     """This machine's compile seconds per second of the COMPILE_* constants' machine, measured once per
-    process (about 0.1 s): the probe's least thread CPU time of three rounds over ``SPEED_REFERENCE_S``,
+    process (about 0.2 s): the probe's least thread CPU time of seven rounds over ``SPEED_REFERENCE_S``,
     kept within [0.25, 4]. Thread CPU, so it reads how fast a core is, not how much of one we get
-    (that is :func:`cpu_share_now`)."""
+    (that is :func:`cpu_load_now`)."""
     best = math.inf
-    for _ in range(3):
+    for _ in range(7):
         t0 = time.thread_time()
         _speed_probe_work(SPEED_PROBE_ITEMS)
         best = min(best, time.thread_time() - t0)
     return max(0.25, min(4.0, best / SPEED_REFERENCE_S))
 
 
-def cpu_share_now(probe_s: float = 0.25) -> float:
-    """The share of a core this process gets now, measured: thread CPU over wall time of a short
-    busy loop. Unlike the load average, it sees that niced jobs yield (on 2 December 2026 at a
-    load average of 19.5, mostly niced jobs, the compile step got far more than 2 / 20.5 of a core)."""
+def busy_jiffies() -> tuple[int, int] | None:
+    """(busy, total) clock ticks of all CPUs so far, from the first line of Linux's ``/proc/stat``: busy is
+    user, system, interrupt and steal time; niced time counts as free (niced work yields to ours), as do
+    idle and I/O wait. None where there is no such file."""
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+    except OSError:
+        return None
+    if len(fields) < 9 or fields[0] != "cpu":
+        return None
+    user, nice, system, idle, iowait, irq, softirq, steal = (int(v) for v in fields[1:9])
+    busy = user + system + irq + softirq + steal
+    return busy, busy + nice + idle + iowait
+
+
+def cpu_load_now(probe_s: float = 0.25) -> tuple[float, float | None]:
+    """(the share of a core this process gets now, the cores other work keeps busy now), measured over one
+    short busy loop: its thread CPU over wall time, and (Linux) the machine's busy ticks during it
+    (:func:`busy_jiffies`) less the loop's own; None for the second where the system does not report it.
+    Unlike the load average, both see that niced jobs yield (on 2 December 2026 at a load average of 19.5,
+    mostly niced jobs, the compile step got far more than 2 / 20.5 of a core); the second also sees a busy
+    process on a core the loop did not need (docs/speed.md, seventh session)."""
+    j0 = busy_jiffies()
     c0, w0 = time.thread_time(), time.perf_counter()
     while time.perf_counter() - w0 < probe_s:
         pass
-    return max(0.02, min(1.0, (time.thread_time() - c0) / (time.perf_counter() - w0)))
+    share = max(0.02, min(1.0, (time.thread_time() - c0) / (time.perf_counter() - w0)))
+    j1 = busy_jiffies()
+    if j0 is None or j1 is None or j1[1] <= j0[1]:
+        return share, None
+    busy_cores = default_workers() * (j1[0] - j0[0]) / (j1[1] - j0[1])
+    return share, max(0.0, busy_cores - share)
 
 
 # a probe that got at least this share got a whole core: on the idle 2-core machine the probe reads
@@ -378,12 +402,13 @@ def cpu_share_now(probe_s: float = 0.25) -> float:
 WHOLE_CORE_SHARE = 0.98
 
 
-def share_of_each(processes: int, share_one: float) -> float:
-    """The share of a core each of ``processes`` busy processes gets, from the share one gets now
-    (:func:`cpu_share_now`): the other load that share implies, ``c / share_one - 1`` processes on
-    ``c`` cores (none if it got a whole core, :data:`WHOLE_CORE_SHARE`), shared with ours."""
+def share_of_each(processes: int, share_one: float, others: float | None = None) -> float:
+    """The share of a core each of ``processes`` busy processes gets on ``c`` cores, shared with the other
+    load: ``others`` busy cores when measured (:func:`cpu_load_now`), else the load the share one process
+    gets now implies, ``c / share_one - 1`` processes (none if it got a whole core, :data:`WHOLE_CORE_SHARE`)."""
     cores = default_workers()
-    others = 0.0 if share_one >= WHOLE_CORE_SHARE else cores / share_one - 1.0
+    if others is None:
+        others = 0.0 if share_one >= WHOLE_CORE_SHARE else cores / share_one - 1.0
     return max(0.02, min(1.0, cores / (others + processes)))
 
 
