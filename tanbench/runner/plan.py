@@ -39,10 +39,11 @@ SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
 # tight 54.0, loose after it 27.4, loose alone 55.7) times the ratio new/old of cold compiles of the code
 # before and after the rare variants were made lazy, old and new compiled side by side on a loaded machine
 # (3 Dec 2026, docs/speed.md "3 December, fifth session"): tight 0.77 (2 pairs: 0.768, 0.778), loose after
-# tight 0.86 (0.829, 0.883), loose alone 0.81 (1 pair). pmf, mpf, ekf and tercom: measured 2 Dec 2026 (after
-# issue 26's wiring), not since.
+# tight 0.86 (0.829, 0.883), loose alone 0.81 (1 pair). pmf, mpf, ekf and tercom: measured again on 3 Dec 2026
+# (seventh session, docs/speed.md) in one process on a fresh cache after the simulation, in this order, without
+# the tight family: 15.32, 11.68, 7.78 and 4.67 s of thread CPU on that VM, over its speed factor 0.481.
 COMPILE_SHARED_S = 5.4
-COMPILE_FAMILY_S = {"tight": 41.6, "loose": 23.5, "pmf": 13.5, "mpf": 7.5, "ekf": 8.4, "tercom": 5.8}
+COMPILE_FAMILY_S = {"tight": 41.6, "loose": 23.5, "pmf": 31.8, "mpf": 24.3, "ekf": 16.2, "tercom": 9.7}
 # a family compiled in a process without the family whose kernels it reuses (a side-by-side helper):
 # loose-dvl after the simulation only, on a fresh cache
 COMPILE_REUSES = {"loose": "tight"}
