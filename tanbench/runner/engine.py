@@ -36,8 +36,7 @@ from tanbench.config import flatten
 from tanbench.errors import describe_exception
 from tanbench.runner.executors import open_executor, warm_up, warm_up_side_by_side
 from tanbench.runner.plan import (Plan, builtin_methods, cell_kernels, check_series_mode, compile_groups,
-                                  compile_processes, compile_seconds, cpu_load_now, machine_speed_factor, make_plan,
-                                  share_of_each)
+                                  compile_processes, cpu_load_now, machine_compile_seconds, make_plan, share_of_each)
 from tanbench.runner.resume import ResumeState
 from tanbench.runner.tasks import Task, TaskResult, cell_scenario, execute
 from tanbench.runner.validate import check_output, validate_sweep
@@ -273,8 +272,7 @@ def compile_kernels(plan: Plan, todo: list[Task], progress: bool, note, truth_ma
     groups = compile_groups(kernels, processes)
     # the longest group's measured compile time, scaled to this machine's core, over the share of a core each
     # compiling process will get
-    guess = (compile_seconds(kernels, processes=processes) * machine_speed_factor()
-             / share_of_each(max(1, len(groups)), *cpu_load_now()))
+    guess = machine_compile_seconds(kernels, processes=processes) / share_of_each(max(1, len(groups)), *cpu_load_now())
     if progress:
         side = f" in {len(groups)} processes" if len(groups) > 1 else ""
         note(f"compiling the numba kernels{side} (once per install or kernel code change; about {guess:.0f} s "

@@ -229,6 +229,13 @@ def compile_seconds(methods, cold=None, processes: int = 1) -> float:
     return COMPILE_SHARED_S + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0) + variants
 
 
+def machine_compile_seconds(methods, cold=None, processes: int = 1) -> float:
+    """:func:`compile_seconds` on this machine's core: times :func:`machine_speed_factor`, which is
+    measured (about 0.2 s, once per process) only when there is something to compile."""
+    seconds = compile_seconds(methods, cold, processes)
+    return seconds * machine_speed_factor() if seconds > 0 else 0.0
+
+
 def size_warning(sweep: Sweep) -> str | None:
     """A warning line for a sweep past :data:`LARGE_SWEEP_CELLS` cells (None below)."""
     n = len(sweep.cells)
@@ -283,8 +290,7 @@ class Plan:
         workers = max(1, min(self.workers, len(tasks)))
         cores = default_workers()
         processes = compile_processes(self.workers)
-        compile_s = compile_seconds(kernels, None if warm is None else [] if warm else kernels, processes=processes)
-        compile_s *= machine_speed_factor() if compile_s > 0 else 1.0
+        compile_s = machine_compile_seconds(kernels, None if warm is None else [] if warm else kernels, processes)
         share_one = min(1.0, cores / (load + 1))  # the parent alone (validation, tables)
         share_compile = min(1.0, cores / (load + processes))  # the processes compiling side by side
         share_all = min(1.0, cores / (load + workers))  # every worker busy
