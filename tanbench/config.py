@@ -447,6 +447,9 @@ class FilterSpec(_Strict):
     loose_fix_shape: float | None = new_option(
         0.9, neutral=None, gt=0, lt=1, description="loose TAN with heading offsets: no fix from a cloud with less "
                                                    "weight inside its own 95 % ellipse [None: no gate]")
+    loose_fix_prior_gate: float | None = new_option(
+        None, gt=0, description="loose TAN with heading offsets: refuse a terrain-only fix whose chi-square (2 dof) "
+                                "against its own window prior is not below this (docs/filters.md 9) [None: no gate]")
     recovery: choices(RECOVERY) = new_option(
         "estimate", description="tight PFs: re-draw a diverged cloud around its own estimate, or around the last "
                                 "healthy estimate moved on by dead reckoning (filters/recovery.py)")
@@ -467,8 +470,9 @@ class FilterSpec(_Strict):
     @model_validator(mode="after")
     def _gates_need_heading_offsets(self):
         if not self.loose_heading_offsets and (self.loose_bias_gate_sigma is not None
-                                               or self.loose_fix_shape is not None):
-            raise ValueError("filter.loose_bias_gate_sigma and filter.loose_fix_shape need "
+                                               or self.loose_fix_shape is not None
+                                               or self.loose_fix_prior_gate is not None):
+            raise ValueError("filter.loose_bias_gate_sigma, loose_fix_shape and loose_fix_prior_gate need "
                              "filter.loose_heading_offsets: true (set them to null without it)")
         return self
 

@@ -26,6 +26,11 @@ Two gates keep fixes from dragging the navigation KF into a wrong basin (item 8)
 whose update would put the z-gyro bias estimate above ``bias_limit`` (rad/s) is rejected
 (the KF's covariance is restored), and no fix is taken from a cloud with less than
 ``shape_min`` of its weight inside its own chi^2_2 95 % ellipse (:func:`unimodal_fraction`).
+A third, ``prior_gate`` (``filter.loose_fix_prior_gate``, off by default; docs/filters.md 9),
+refuses a terrain-only fix whose chi-square against its own window prior
+(``eskf.fix_prior_chi2``) is not below it: the fix then disagrees with the PF's own posterior,
+an artefact of dividing two nearly equal covariances. A refused fix is recorded as rejected
+but does not count towards reopening the KF.
 Everything else (fix interval, chi-square gate, floor, reopening a locked-out KF,
 divergence, keep-on-map) is the built-in loop's.
 """
@@ -51,16 +56,16 @@ from tanbench.filters.state import BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.tight import keep_on_map
 from tanbench.filters.trig import attitude_reference, sin_cos
 from tanbench.navigation.eskf import (EB, EE, EN, EPSI, N_ERROR, copy_matrix, eskf_predict, eskf_update,
-                                      terrain_only_fix)
+                                      fix_prior_chi2, terrain_only_fix)
 from tanbench.navigation.increments import JAZE, JAZN, SZ
 
 LOOSE_TURNED_COLS = np.array([E, N, YAW], dtype=np.int64)  # the rows the regularisation jitters
 # the navigation solution at the K updates: the (K-1, 12) increments, yaw, pitch, roll and up (K,); the body-frame
 # beam unit vectors (m, 3) and the ranges (K, m)
 TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
-# the fix gates: the z-gyro bias limit (rad/s; inf: off), the cloud's weight inside its 95 % ellipse (0: off), and the
-# sampling time (s)
-Gates = namedtuple("Gates", "bias_limit shape_min dt")
+# the fix gates: the z-gyro bias limit (rad/s; inf: off), the cloud's weight inside its 95 % ellipse (0: off), the
+# sampling time (s), and the chi-square above which a terrain-only fix disagrees with its own window prior (inf: off)
+Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate", defaults=(np.inf,))
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
 
 
@@ -169,7 +174,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
     out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
-    bias_limit, shape_min, dt = gates
+    bias_limit, shape_min, dt, prior_gate = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]
@@ -264,7 +269,11 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
             weighted_estimate(xp[:2], wp, -1, 0.0, mean_p, v_p, p_prior)
             m_prior[0] = mean_p[0]
             m_prior[1] = mean_p[1]
-            if shape_ok and terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r):
+            usable = shape_ok and terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r)
+            if usable and prior_gate < np.inf and not fix_prior_chi2(zt, r, m_prior, p_prior) < prior_gate:
+                usable = False  # the fix disagrees with the cloud it came from: refused, not a KF miss
+                rejected_out[k] = 1
+            if usable:
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
                 if first_fix:

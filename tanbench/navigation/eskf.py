@@ -183,6 +183,35 @@ def terrain_only_fix(m_post, p_post, m_prior, p_prior, max_std, z, r):
     return True
 
 
+@nb.njit(cache=True)
+def fix_prior_chi2(z, r, m_prior, p_prior):
+    """The terrain-only fix's chi-square (2 dof) against the window's prior: (z - m_prior)^T
+    (r + p_prior)^-1 (z - m_prior). By the algebra of :func:`terrain_only_fix` it equals the
+    fix's distance from the PF's own posterior mean under its covariance, so a large value
+    means the fix disagrees with the cloud it was divided out of (a near-singular r^-1
+    extrapolates the small difference between two Monte Carlo moments; docs/filters.md 9).
+    inf for a singular sum."""
+    s = np.empty((2, 2))
+    inv = np.empty((2, 2))
+    for i in range(2):
+        for j in range(2):
+            s[i, j] = r[i, j] + p_prior[i, j]
+    if not _inv2(s, inv):
+        return np.inf
+    d0 = z[0] - m_prior[0]
+    d1 = z[1] - m_prior[1]
+    return d0 * (inv[0, 0] * d0 + inv[0, 1] * d1) + d1 * (inv[1, 0] * d0 + inv[1, 1] * d1)
+
+
+def fix_prior_chi2_numpy(z, r, m_prior, p_prior):
+    """Plain-numpy reference of :func:`fix_prior_chi2`."""
+    s = np.asarray(r, dtype=float) + np.asarray(p_prior, dtype=float)
+    if not np.linalg.det(s) > 0:
+        return np.inf
+    d = np.asarray(z, dtype=float) - np.asarray(m_prior, dtype=float)
+    return float(d @ np.linalg.solve(s, d))
+
+
 def terrain_only_fix_numpy(m_post, p_post, m_prior, p_prior, max_std):
     """Plain-numpy reference of :func:`terrain_only_fix`: (usable, z, r)."""
     ipost, iprior = np.linalg.inv(p_post), np.linalg.inv(p_prior)
