@@ -135,6 +135,35 @@ def test_terrain_only_fix_matches_numpy_and_removes_the_prior():
     assert not eskf.terrain_only_fix(m_prior, p_post, m_prior, p_prior, 25.0, z, r)
 
 
+
+def test_fix_prior_chi2_matches_numpy_and_equals_the_distance_from_the_posterior():
+    """docs/filters.md 9: the fix's chi-square against its window prior equals the PF posterior
+    mean's distance from the fix under the transformed covariance, and flags an extrapolated fix."""
+    rng = np.random.default_rng([KERNEL_SEED, 123])
+    z, r = np.empty(2), np.empty((2, 2))
+    for _ in range(5):
+        p_prior = random_cov(rng, 2, np.array([20.0, 20.0]))
+        r_true = random_cov(rng, 2, np.array([3.0, 3.0]))
+        m_prior = rng.normal(0, 50, 2)
+        z_true = rng.normal(0, 50, 2)
+        p_post = np.linalg.inv(np.linalg.inv(p_prior) + np.linalg.inv(r_true))
+        m_post = p_post @ (np.linalg.solve(p_prior, m_prior) + np.linalg.solve(r_true, z_true))
+        assert eskf.terrain_only_fix(m_post, p_post, m_prior, p_prior, 1e3, z, r)
+        chi2 = eskf.fix_prior_chi2(z, r, m_prior, p_prior)
+        assert chi2 == pytest.approx(eskf.fix_prior_chi2_numpy(z, r, m_prior, p_prior), rel=1e-9)
+        # z - m_post = P_post P_prior^-1 (z - m_prior): the same chi-square about the posterior
+        t = p_post @ np.linalg.inv(p_prior)
+        d = z - m_post
+        assert chi2 == pytest.approx(float(d @ np.linalg.solve(t @ (r + p_prior) @ t.T, d)), rel=1e-6)
+    # the diagnosed case: a window prior nearly as tight as the posterior, means 1 m apart
+    m_post, p_post = np.array([1109.9, 464.5]), np.array([[2.94, 0.61], [0.61, 1.61]])
+    m_prior, p_prior = np.array([1108.9, 465.5]), np.array([[3.28, 0.90], [0.90, 1.91]])
+    assert eskf.terrain_only_fix(m_post, p_post, m_prior, p_prior, 25.0, z, r)
+    assert np.hypot(*(z - m_post)) > 50.0  # the fix lands far from the cloud it came from
+    assert eskf.fix_prior_chi2(z, r, m_prior, p_prior) > 13.8
+    assert eskf.fix_prior_chi2(m_prior, r, m_prior, p_prior) == 0.0
+    assert eskf.fix_prior_chi2(z, np.zeros((2, 2)), m_prior, np.zeros((2, 2))) == np.inf
+
 # --------------------------------------------------------------------------------------
 # map representation variance and the map-aware likelihoods
 # --------------------------------------------------------------------------------------

@@ -1,0 +1,179 @@
+"""loose-dvl's lost runs and the fix-prior gate (docs/filters.md section 9): the paired ablation.
+
+Each run's vehicle data and filter seed are those of the cell at the defaults; loose-dvl runs
+once at the defaults and once with ``filter.loose_fix_prior_gate`` (the candidate), on the same
+data and seed. Writes one CSV row per (cell, run, arm) and prints the section's statistics.
+
+    .venv/bin/python examples/prototypes/loose_fix_gate.py OUT.csv [--workers 2]
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --summary OUT.csv
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --diagnose SWEEP.yaml RUN [CELL]
+
+``--diagnose`` runs loose-dvl on one run of a sweep's cell with a copy of the loop that logs
+every fix attempt (the PF's posterior, the window prior, the terrain-only fix and its chi-square
+against the prior, the KF's innovation and correction).
+"""
+
+from __future__ import annotations
+
+import csv
+import inspect
+import math
+import sys
+import textwrap
+from multiprocessing import Pool
+
+import numpy as np
+
+from tanbench.config import Scenario
+from tanbench.methods import get, run_method
+from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
+from tanbench.simulation import simulate_vehicle
+from tanbench.sweep import load_sweep
+
+ROOT = 20261203
+GATE = 13.8
+QUICK = {"terrain": {"kind": "synthetic", "seed": 1}, "noise_m": 1.0, "sampling_time_s": 1}
+CELLS = {  # name -> (scenario, root seed, runs)
+    "A10-2000": (dict(QUICK, area="A", map_resolution_m=10, particles=2000), ROOT, 300),
+    "A10-1000": (dict(QUICK, area="A", map_resolution_m=10, particles=1000), ROOT, 200),
+    "A20-1000": (dict(QUICK, area="A", map_resolution_m=20, particles=1000), ROOT, 200),
+    "A30-3000": (dict(QUICK, area="A", map_resolution_m=30, particles=3000), ROOT, 200),
+    "B10-2000": (dict(QUICK, area="B", map_resolution_m=10, particles=2000), ROOT, 100),
+}
+MONTEREY = "configs/monterey.yaml"
+FIELDS = ["cell", "run", "arm", "diverged", "final_horizontal_error_m", "mean_horizontal_error_m",
+          "fixes_accepted", "fixes_rejected"]
+
+
+def cells() -> dict:
+    out = {name: (Scenario(**spec), root, runs) for name, (spec, root, runs) in CELLS.items()}
+    sweep = load_sweep(MONTEREY)
+    for cell in sweep.cells:
+        out[f"Monterey-{cell.scenario.map_resolution_m:g}"] = (cell.scenario, sweep.spec.seed, 20)
+    return out
+
+
+def with_gate(scenario: Scenario) -> Scenario:
+    data = scenario.model_dump(mode="json")
+    data["filter"]["loose_fix_prior_gate"] = GATE
+    return Scenario(**data)
+
+
+def _pair(job):
+    name, scenario, root, run = job
+    vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
+    fseed = keyed_filter_seed(root, scenario.cell_key(), get("loose-dvl").seed_id, run)
+    rows = []
+    for arm, sc in (("defaults", scenario), ("gate", with_gate(scenario))):
+        m = run_method(sc, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+        rows.append({"cell": name, "run": run, "arm": arm, **{k: m[k] for k in FIELDS[3:]}})
+    return rows
+
+
+def ablation(out_csv: str, workers: int) -> None:
+    jobs = [(name, sc, root, r) for name, (sc, root, runs) in cells().items() for r in range(runs)]
+    with open(out_csv, "w", newline="") as fh, Pool(workers) as pool:
+        writer = csv.DictWriter(fh, FIELDS)
+        writer.writeheader()
+        for i, rows in enumerate(pool.imap_unordered(_pair, jobs, chunksize=4)):
+            writer.writerows(rows)
+            if i % 100 == 0:
+                fh.flush()
+                print(f"{i + 1} of {len(jobs)} pairs", flush=True)
+    summary(out_csv)
+
+
+def sign_test_p(b: int, c: int) -> float:
+    """One-sided exact binomial test: P(X <= c) for X ~ Bin(b + c, 1/2)."""
+    n = b + c
+    return sum(math.comb(n, i) for i in range(c + 1)) / 2.0 ** n if n else 1.0
+
+
+def summary(path: str) -> None:
+    import pandas as pd
+    from scipy import stats
+
+    df = pd.read_csv(path)
+    df["diverged"] = df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])
+    wide = df.pivot_table(index=["cell", "run"], columns="arm",
+                          values=["diverged", "final_horizontal_error_m", "mean_horizontal_error_m",
+                                  "fixes_accepted", "fixes_rejected"], aggfunc="first")
+    print("| cell | pairs | lost: defaults | lost: gate | mean final error, both kept: defaults / gate (m) "
+          "| fixes accepted / rejected: defaults | gate |")
+    print("|---|---|---|---|---|---|---|")
+    for name, g in wide.groupby(level="cell", sort=False):
+        kept = g[~g[("diverged", "defaults")].astype(bool) & ~g[("diverged", "gate")].astype(bool)]
+        print(f"| {name} | {len(g)} | {int(g[('diverged', 'defaults')].sum())} | {int(g[('diverged', 'gate')].sum())} "
+              f"| {kept[('final_horizontal_error_m', 'defaults')].mean():.2f} / "
+              f"{kept[('final_horizontal_error_m', 'gate')].mean():.2f} "
+              f"| {g[('fixes_accepted', 'defaults')].mean():.1f} / {g[('fixes_rejected', 'defaults')].mean():.1f} "
+              f"| {g[('fixes_accepted', 'gate')].mean():.1f} / {g[('fixes_rejected', 'gate')].mean():.1f} |")
+    synth = wide[~wide.index.get_level_values("cell").str.startswith("Monterey")]
+    d0 = synth[("diverged", "defaults")].astype(bool)
+    d1 = synth[("diverged", "gate")].astype(bool)
+    b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
+    p = sign_test_p(b, c)
+    verdict1 = "inconclusive (defaults lost fewer than 5)" if d0.sum() < 5 else ("holds" if p < 0.05 else "fails")
+    print(f"\nrule 1 (synthetic, {len(synth)} pairs): lost at the defaults {int(d0.sum())}, with the gate {int(d1.sum())}; "
+          f"discordant b = {b} (defaults only), c = {c} (gate only); one-sided sign test p = {p:.4f}: {verdict1}")
+    kept = synth[~d0 & ~d1]
+    diff = (kept[("final_horizontal_error_m", "gate")] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
+    mean, sem = diff.mean(), diff.std(ddof=1) / math.sqrt(diff.size)
+    t = stats.t.ppf(0.975, diff.size - 1)
+    print(f"rule 2 ({diff.size} pairs kept in both): final error gate - defaults {mean:+.3f} m "
+          f"[{mean - t * sem:+.3f}, {mean + t * sem:+.3f}]: {'holds' if mean + t * sem <= 0.2 else 'fails'} (upper <= +0.2 m)")
+    mont = wide[wide.index.get_level_values("cell").str.startswith("Monterey")]
+    lost = int(mont[("diverged", "gate")].astype(bool).sum())
+    print(f"rule 3 (Monterey, {len(mont)} runs): lost with the gate {lost}: {'holds' if lost == 0 else 'fails'}")
+
+
+def diagnose(sweep_path: str, run: int, cell_index: int = 0) -> None:
+    import tanbench.filters.loose_turned as LT
+    import tanbench.methods.loose as ML
+    from tanbench.navigation.eskf import fix_prior_chi2
+
+    sweep = load_sweep(sweep_path)
+    sc = sweep.cells[cell_index].scenario
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), run))
+    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, run)
+    log = []
+    src = textwrap.dedent(inspect.getsource(LT.loose_turned_loop.py_func)).replace("@nb.njit(cache=True)\n", "")
+    at = "            usable = shape_ok and terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r)\n"
+    assert at in src, "the loop changed: update --diagnose"
+    src = src.replace(at, at + "            LOG.append([k, usable, mean[0], mean[1], math.sqrt(cov[0, 0] + cov[1, 1]), "
+                                "m_prior[0], m_prior[1], math.sqrt(p_prior[0, 0] + p_prior[1, 1]), zt[0], zt[1], "
+                                "math.sqrt(r[0, 0] + r[1, 1]), FIXCHI(zt, r, m_prior, p_prior), nav[E, 0], nav[N, 0], "
+                                "nav[YAW, 0]])\n")
+    namespace = dict(vars(LT), LOG=log, FIXCHI=fix_prior_chi2)
+    exec(compile(src, "loose_turned_loop (diagnostic copy)", "exec"), namespace)
+    saved = ML.loose_turned_loop
+    ML.loose_turned_loop = namespace["loose_turned_loop"]
+    try:
+        result = run_method(sc, "loose-dvl", vehicle, fseed)
+    finally:
+        ML.loose_turned_loop = saved
+    truth = vehicle.truth
+    upd_t = np.asarray(result.series["t"])
+    te = np.interp(upd_t, truth.t, truth.pos[:, 0])
+    tn = np.interp(upd_t, truth.t, truth.pos[:, 1])
+    m = result.metrics
+    print(f"final error {m['final_horizontal_error_m']:.1f} m, fixes accepted {m['fixes_accepted']}, "
+          f"rejected {m['fixes_rejected']}")
+    print("  t  | PF error, std | prior std | fix: off the PF, std | chi2 vs prior | KF error, heading (deg)")
+    for k, usable, pe, pn, ps, _, _, qs, ze, zn, rs, chi, ne, nn, yaw in log:
+        k = int(k)
+        fix = f"{math.hypot(ze - pe, zn - pn):7.1f} m, {rs:5.1f}" if usable else "      (none)     "
+        print(f"{upd_t[k]:5.0f} | {math.hypot(pe - te[k], pn - tn[k]):6.1f} m, {ps:4.1f} | {qs:5.1f} | {fix} "
+              f"| {chi if usable else float('nan'):8.1f} | {math.hypot(ne - te[k], nn - tn[k]):6.1f} m, "
+              f"{math.degrees(yaw):7.1f}")
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    if args[:1] == ["--summary"]:
+        summary(args[1])
+    elif args[:1] == ["--diagnose"]:
+        diagnose(args[1], int(args[2]), int(args[3]) if len(args) > 3 else 0)
+    else:
+        workers = int(args[args.index("--workers") + 1]) if "--workers" in args else 2
+        ablation(args[0], workers)

@@ -1,0 +1,42 @@
+"""docs/filters.md 9: loose-dvl's fix-prior gate (filter.loose_fix_prior_gate)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from tanbench.config import Scenario
+from tanbench.methods import get, run_method
+from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
+from tanbench.simulation import simulate_vehicle
+from tanbench.sweep import load_sweep
+
+
+def test_the_gate_is_an_option_off_by_default_and_needs_heading_offsets():
+    assert Scenario().filter.loose_fix_prior_gate is None
+    on = Scenario(filter={"loose_fix_prior_gate": 13.8})
+    assert on.cell_key() != Scenario().cell_key()  # a non-neutral value names its own cell
+    assert Scenario(filter={"loose_fix_prior_gate": None}).cell_key() == Scenario().cell_key()
+    with pytest.raises(ValidationError, match="loose_fix_prior_gate"):
+        Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+                         "loose_fix_prior_gate": 13.8})
+
+
+def test_the_diagnosed_run_is_lost_by_its_fixes_and_kept_by_the_gate():
+    """quick.yaml's area A cell, run 2: at the defaults an extrapolated terrain-only fix turns the
+    navigation heading by -71 degrees and the KF never recovers; with the gate, on the same vehicle
+    data and filter seed, that fix is refused."""
+    sweep = load_sweep("configs/quick.yaml")
+    sc = sweep.cells[0].scenario
+    assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 10, 2000)
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
+    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
+    gate = Scenario(**{**sc.model_dump(mode="json"),
+                       "filter": {**sc.model_dump(mode="json")["filter"], "loose_fix_prior_gate": 13.8}})
+    runs = {name: run_method(s, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
+            for name, s in (("defaults", sc), ("gate", gate))}
+    assert runs["defaults"].metrics["diverged"]
+    assert runs["defaults"].metrics["final_horizontal_error_m"] > 100.0
+    assert not runs["gate"].metrics["diverged"]
+    assert runs["gate"].metrics["final_horizontal_error_m"] < 10.0
