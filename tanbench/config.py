@@ -449,7 +449,8 @@ class FilterSpec(_Strict):
                                                    "weight inside its own 95 % ellipse [None: no gate]")
     loose_fix_prior_gate: float | None = new_option(
         None, gt=0, description="loose TAN with heading offsets: refuse a terrain-only fix whose chi-square (2 dof) "
-                                "against its own window prior is not below this (docs/filters.md 9) [None: no gate]")
+                                "against its own window prior is not below this (docs/filters.md 9; 13.8 helps "
+                                "fault-free relief and hurts under world faults) [None: no gate]")
     recovery: choices(RECOVERY) = new_option(
         "estimate", description="tight PFs: re-draw a diverged cloud around its own estimate, or around the last "
                                 "healthy estimate moved on by dead reckoning (filters/recovery.py)")

@@ -299,7 +299,8 @@ def test_kernel_variant_is_what_the_tight_loop_compiles(monkeypatch):
     assert len(seen) == len(cases)
 
 
-LOOSE_KALMAN = {"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None}
+LOOSE_KALMAN = {"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+                "loose_fix_prior_gate": None}
 
 
 def test_kernel_variant_is_the_loop_loose_dvl_runs(monkeypatch):

@@ -1,12 +1,18 @@
 """loose-dvl's lost runs and the fix-prior gate (docs/filters.md section 9): the paired ablation.
 
-Each run's vehicle data and filter seed are those of the cell at the defaults; loose-dvl runs
-once at the defaults and once with ``filter.loose_fix_prior_gate`` (the candidate), on the same
-data and seed. Writes one CSV row per (cell, run, arm) and prints the section's statistics.
+Each run's vehicle data and filter seed are those of the cell without the gate
+(``filter.loose_fix_prior_gate: null``, the defaults when the ablation was fixed); loose-dvl runs
+once without and once with the gate at 13.8, on the same data and seed. The arms are named
+"defaults" (no gate) and "gate" as in the section. Writes one CSV row per (cell, run, arm) and prints the section's statistics.
 
     .venv/bin/python examples/prototypes/loose_fix_gate.py OUT.csv [--workers 2]
     .venv/bin/python examples/prototypes/loose_fix_gate.py --summary OUT.csv
-    .venv/bin/python examples/prototypes/loose_fix_gate.py --diagnose SWEEP.yaml RUN [CELL]
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --diagnose SWEEP.yaml RUN [CELL [GATE]]
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --paired SWEEP.yaml RUNS
+
+``--paired`` runs every loose-dvl run of a sweep's distinct cells with the gate on and off on the
+same vehicle data and filter seed, the seeds of each cell with the gate at 13.8 in its key (the
+checks of section 9 made while 13.8 was the default), and counts the runs lost in one arm only.
 
 ``--diagnose`` runs loose-dvl on one run of a sweep's cell with a copy of the loop that logs
 every fix attempt (the PF's posterior, the window prior, the terrain-only fix and its chi-square
@@ -46,16 +52,16 @@ FIELDS = ["cell", "run", "arm", "diverged", "final_horizontal_error_m", "mean_ho
 
 
 def cells() -> dict:
-    out = {name: (Scenario(**spec), root, runs) for name, (spec, root, runs) in CELLS.items()}
+    out = {name: (with_gate(Scenario(**spec), None), root, runs) for name, (spec, root, runs) in CELLS.items()}
     sweep = load_sweep(MONTEREY)
     for cell in sweep.cells:
-        out[f"Monterey-{cell.scenario.map_resolution_m:g}"] = (cell.scenario, sweep.spec.seed, 20)
+        out[f"Monterey-{cell.scenario.map_resolution_m:g}"] = (with_gate(cell.scenario, None), sweep.spec.seed, 20)
     return out
 
 
-def with_gate(scenario: Scenario) -> Scenario:
+def with_gate(scenario: Scenario, gate: float | None) -> Scenario:
     data = scenario.model_dump(mode="json")
-    data["filter"]["loose_fix_prior_gate"] = GATE
+    data["filter"]["loose_fix_prior_gate"] = gate
     return Scenario(**data)
 
 
@@ -64,7 +70,7 @@ def _pair(job):
     vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
     fseed = keyed_filter_seed(root, scenario.cell_key(), get("loose-dvl").seed_id, run)
     rows = []
-    for arm, sc in (("defaults", scenario), ("gate", with_gate(scenario))):
+    for arm, sc in (("defaults", scenario), ("gate", with_gate(scenario, GATE))):
         m = run_method(sc, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
         rows.append({"cell": name, "run": run, "arm": arm, **{k: m[k] for k in FIELDS[3:]}})
     return rows
@@ -127,15 +133,21 @@ def summary(path: str) -> None:
     print(f"rule 3 (Monterey, {len(mont)} runs): lost with the gate {lost}: {'holds' if lost == 0 else 'fails'}")
 
 
-def diagnose(sweep_path: str, run: int, cell_index: int = 0) -> None:
+def diagnose(sweep_path: str, run: int, cell_index: int = 0, gate: str = "none") -> None:
+    """``gate``: "none" (the seeds and settings without the gate), a chi-square value (the same
+    seeds, with that gate), or "sweep" (the sweep's own settings and seeds)."""
     import tanbench.filters.loose_turned as LT
     import tanbench.methods.loose as ML
     from tanbench.navigation.eskf import fix_prior_chi2
 
     sweep = load_sweep(sweep_path)
     sc = sweep.cells[cell_index].scenario
+    if gate != "sweep":  # the run as stored before the gate's default (its key), or with a gate
+        sc = with_gate(sc, None)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), run))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, run)
+    if gate not in ("sweep", "none"):
+        sc = with_gate(sc, float(gate))
     log = []
     src = textwrap.dedent(inspect.getsource(LT.loose_turned_loop.py_func)).replace("@nb.njit(cache=True)\n", "")
     at = "            usable = shape_ok and terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r)\n"
@@ -143,7 +155,7 @@ def diagnose(sweep_path: str, run: int, cell_index: int = 0) -> None:
     src = src.replace(at, at + "            LOG.append([k, usable, mean[0], mean[1], math.sqrt(cov[0, 0] + cov[1, 1]), "
                                 "m_prior[0], m_prior[1], math.sqrt(p_prior[0, 0] + p_prior[1, 1]), zt[0], zt[1], "
                                 "math.sqrt(r[0, 0] + r[1, 1]), FIXCHI(zt, r, m_prior, p_prior), nav[E, 0], nav[N, 0], "
-                                "nav[YAW, 0]])\n")
+                                "nav[YAW, 0], math.sqrt(p_kf[EPSI, EPSI]), p_kf[EE, EPSI], p_kf[EN, EPSI]])\n")
     namespace = dict(vars(LT), LOG=log, FIXCHI=fix_prior_chi2)
     exec(compile(src, "loose_turned_loop (diagnostic copy)", "exec"), namespace)
     saved = ML.loose_turned_loop
@@ -159,21 +171,54 @@ def diagnose(sweep_path: str, run: int, cell_index: int = 0) -> None:
     m = result.metrics
     print(f"final error {m['final_horizontal_error_m']:.1f} m, fixes accepted {m['fixes_accepted']}, "
           f"rejected {m['fixes_rejected']}")
-    print("  t  | PF error, std | prior std | fix: off the PF, std | chi2 vs prior | KF error, heading (deg)")
-    for k, usable, pe, pn, ps, _, _, qs, ze, zn, rs, chi, ne, nn, yaw in log:
+    print("  t  | PF error, std | prior std | fix: off the PF, std | chi2 vs prior | KF error, heading (deg), "
+          "its std (deg), P(e, psi), P(n, psi)")
+    for k, usable, pe, pn, ps, _, _, qs, ze, zn, rs, chi, ne, nn, yaw, syaw, pep, pnp in log:
         k = int(k)
         fix = f"{math.hypot(ze - pe, zn - pn):7.1f} m, {rs:5.1f}" if usable else "      (none)     "
         print(f"{upd_t[k]:5.0f} | {math.hypot(pe - te[k], pn - tn[k]):6.1f} m, {ps:4.1f} | {qs:5.1f} | {fix} "
               f"| {chi if usable else float('nan'):8.1f} | {math.hypot(ne - te[k], nn - tn[k]):6.1f} m, "
-              f"{math.degrees(yaw):7.1f}")
+              f"{math.degrees(yaw):7.1f}, {math.degrees(syaw):5.1f}, {pep:8.2f}, {pnp:8.2f}")
+
+
+def _paired_job(job):
+    scenario, root, run = job
+    vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
+    fseed = keyed_filter_seed(root, scenario.cell_key(), get("loose-dvl").seed_id, run)
+    out = []
+    for gate in (GATE, None):
+        m = run_method(with_gate(scenario, gate), "loose-dvl", vehicle,
+                       np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+        out.append((bool(m["diverged"]), float(m["final_horizontal_error_m"])))
+    return out
+
+
+def paired_sweep(sweep_path: str, runs: int, workers: int = 2) -> None:
+    sweep = load_sweep(sweep_path)
+    cells = {}
+    for cell in sweep.cells:  # distinct cells, each keyed with the gate at 13.8
+        gated = with_gate(cell.scenario, GATE)
+        cells.setdefault(gated.cell_key(), gated)
+    jobs = [(sc, sweep.spec.seed, r) for sc in cells.values() for r in range(runs)]
+    with Pool(workers) as pool:
+        results = pool.map(_paired_job, jobs, chunksize=4)
+    gate_only = sum(g[0] and not n[0] for g, n in results)
+    off_only = sum(n[0] and not g[0] for g, n in results)
+    both = sum(g[0] and n[0] for g, n in results)
+    k, n = min(gate_only, off_only), gate_only + off_only
+    p = min(1.0, 2 * sum(math.comb(n, i) for i in range(k + 1)) / 2.0 ** n) if n else 1.0
+    print(f"{sweep_path}: {len(results)} pairs; lost with the gate only {gate_only}, without it only {off_only}, "
+          f"both {both}; two-sided sign test p = {p:.4f}")
 
 
 if __name__ == "__main__":
     args = sys.argv[1:]
     if args[:1] == ["--summary"]:
         summary(args[1])
+    elif args[:1] == ["--paired"]:
+        paired_sweep(args[1], int(args[2]))
     elif args[:1] == ["--diagnose"]:
-        diagnose(args[1], int(args[2]), int(args[3]) if len(args) > 3 else 0)
+        diagnose(args[1], int(args[2]), int(args[3]) if len(args) > 3 else 0, args[4] if len(args) > 4 else "none")
     else:
         workers = int(args[args.index("--workers") + 1]) if "--workers" in args else 2
         ablation(args[0], workers)
