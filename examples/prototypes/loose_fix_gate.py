@@ -168,17 +168,19 @@ def diagnose(sweep_path: str, run: int, cell_index: int = 0, gate: str = "none")
     upd_t = np.asarray(result.series["t"])
     te = np.interp(upd_t, truth.t, truth.pos[:, 0])
     tn = np.interp(upd_t, truth.t, truth.pos[:, 1])
+    tyaw = np.interp(upd_t, truth.t, truth.yaw)  # continuous (Eq. 5: 0 north, +pi/2 west), as the filters' yaw
     m = result.metrics
     print(f"final error {m['final_horizontal_error_m']:.1f} m, fixes accepted {m['fixes_accepted']}, "
           f"rejected {m['fixes_rejected']}")
-    print("  t  | PF error, std | prior std | fix: off the PF, std | chi2 vs prior | KF error, heading (deg), "
+    print("  t  | PF error, std | prior std | fix: off the PF, std | chi2 vs prior | KF error, heading error (deg), "
           "its std (deg), P(e, psi), P(n, psi)")
     for k, usable, pe, pn, ps, _, _, qs, ze, zn, rs, chi, ne, nn, yaw, syaw, pep, pnp in log:
         k = int(k)
         fix = f"{math.hypot(ze - pe, zn - pn):7.1f} m, {rs:5.1f}" if usable else "      (none)     "
         print(f"{upd_t[k]:5.0f} | {math.hypot(pe - te[k], pn - tn[k]):6.1f} m, {ps:4.1f} | {qs:5.1f} | {fix} "
               f"| {chi if usable else float('nan'):8.1f} | {math.hypot(ne - te[k], nn - tn[k]):6.1f} m, "
-              f"{math.degrees(yaw):7.1f}, {math.degrees(syaw):5.1f}, {pep:8.2f}, {pnp:8.2f}")
+              f"{(math.degrees(yaw - tyaw[k]) + 180.0) % 360.0 - 180.0:7.1f}, {math.degrees(syaw):5.1f}, {pep:8.2f}, "
+              f"{pnp:8.2f}")
 
 
 def _paired_job(job):
