@@ -110,16 +110,22 @@ def test_heading_observable_from_fixes_while_moving():
             assert math.degrees(math.sqrt(p[2, 2])) > 29.0
 
 
+def gaussian_window(rng):
+    """A random window: prior (m_prior, p_prior), a terrain measurement (z_true, r_true) and the
+    Bayesian posterior (m_post, p_post) they give."""
+    p_prior = random_cov(rng, 2, np.array([20.0, 20.0]))
+    r_true = random_cov(rng, 2, np.array([3.0, 3.0]))
+    m_prior = rng.normal(0, 50, 2)
+    z_true = rng.normal(0, 50, 2)
+    p_post = np.linalg.inv(np.linalg.inv(p_prior) + np.linalg.inv(r_true))
+    m_post = p_post @ (np.linalg.solve(p_prior, m_prior) + np.linalg.solve(r_true, z_true))
+    return m_prior, p_prior, z_true, r_true, m_post, p_post
+
+
 def test_terrain_only_fix_matches_numpy_and_removes_the_prior():
     rng = np.random.default_rng([KERNEL_SEED, 122])
     for _ in range(5):
-        p_prior = random_cov(rng, 2, np.array([20.0, 20.0]))
-        r_true = random_cov(rng, 2, np.array([3.0, 3.0]))
-        m_prior = rng.normal(0, 50, 2)
-        z_true = rng.normal(0, 50, 2)
-        # the Bayesian posterior of a Gaussian prior and a Gaussian measurement (z_true, r_true)
-        p_post = np.linalg.inv(np.linalg.inv(p_prior) + np.linalg.inv(r_true))
-        m_post = p_post @ (np.linalg.solve(p_prior, m_prior) + np.linalg.solve(r_true, z_true))
+        m_prior, p_prior, z_true, r_true, m_post, p_post = gaussian_window(rng)
         z, r = np.empty(2), np.empty((2, 2))
         assert eskf.terrain_only_fix(m_post, p_post, m_prior, p_prior, 1e3, z, r)
         ok, z_ref, r_ref = eskf.terrain_only_fix_numpy(m_post, p_post, m_prior, p_prior, 1e3)
@@ -135,19 +141,13 @@ def test_terrain_only_fix_matches_numpy_and_removes_the_prior():
     assert not eskf.terrain_only_fix(m_prior, p_post, m_prior, p_prior, 25.0, z, r)
 
 
-
 def test_fix_prior_chi2_matches_numpy_and_equals_the_distance_from_the_posterior():
     """docs/filters.md 9: the fix's chi-square against its window prior equals the PF posterior
     mean's distance from the fix under the transformed covariance, and flags an extrapolated fix."""
     rng = np.random.default_rng([KERNEL_SEED, 123])
     z, r = np.empty(2), np.empty((2, 2))
     for _ in range(5):
-        p_prior = random_cov(rng, 2, np.array([20.0, 20.0]))
-        r_true = random_cov(rng, 2, np.array([3.0, 3.0]))
-        m_prior = rng.normal(0, 50, 2)
-        z_true = rng.normal(0, 50, 2)
-        p_post = np.linalg.inv(np.linalg.inv(p_prior) + np.linalg.inv(r_true))
-        m_post = p_post @ (np.linalg.solve(p_prior, m_prior) + np.linalg.solve(r_true, z_true))
+        m_prior, p_prior, _, _, m_post, p_post = gaussian_window(rng)
         assert eskf.terrain_only_fix(m_post, p_post, m_prior, p_prior, 1e3, z, r)
         chi2 = eskf.fix_prior_chi2(z, r, m_prior, p_prior)
         assert chi2 == pytest.approx(eskf.fix_prior_chi2_numpy(z, r, m_prior, p_prior), rel=1e-9)
