@@ -31,7 +31,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
-                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
+                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIX_PRIOR_FALLBACK, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
                               POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION,
                               REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
@@ -451,6 +451,10 @@ class FilterSpec(_Strict):
         None, gt=0, description="loose TAN with heading offsets: refuse a terrain-only fix whose chi-square (2 dof) "
                                 "against its own window prior is not below this (docs/filters.md 9; 13.8 helps "
                                 "fault-free relief and hurts under world faults) [None: no gate]")
+    loose_fix_prior_fallback: choices(LOOSE_FIX_PRIOR_FALLBACK) = new_option(
+        "refuse", description="loose TAN: a terrain-only fix that fails loose_fix_prior_gate is refused, or replaced "
+                              "by the PF's posterior mean with the window prior's covariance (docs/filters.md 9.1) "
+                              "[refuse]")
     recovery: choices(RECOVERY) = new_option(
         "estimate", description="tight PFs: re-draw a diverged cloud around its own estimate, or around the last "
                                 "healthy estimate moved on by dead reckoning (filters/recovery.py)")
@@ -475,6 +479,9 @@ class FilterSpec(_Strict):
                                                or self.loose_fix_prior_gate is not None):
             raise ValueError("filter.loose_bias_gate_sigma, loose_fix_shape and loose_fix_prior_gate need "
                              "filter.loose_heading_offsets: true (set them to null without it)")
+        if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:
+            raise ValueError("filter.loose_fix_prior_fallback: posterior needs filter.loose_fix_prior_gate "
+                             "(the fixes it replaces are the ones that gate refuses)")
         return self
 
     # ---- derived quantities -----------------------------------------------------

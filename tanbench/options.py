@@ -24,6 +24,8 @@ RECOVERY = {"estimate": 0, "last-healthy": 1}
 DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}
 LIKELIHOOD = {"student-t": 1, "gaussian": 0}  # beam density of the map-aware kernels (filters/likelihood.py)
 LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")
+# what the loose TAN does with a terrain-only fix that fails filter.loose_fix_prior_gate (docs/filters.md 9.1)
+LOOSE_FIX_PRIOR_FALLBACK = ("refuse", "posterior")
 # which tight-filter states the regularisation jitters (state indices in filters/tight.py)
 REGULARISED_STATES = ("position-heading-biases", "heading-biases", "biases")
 

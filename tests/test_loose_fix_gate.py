@@ -43,3 +43,19 @@ def test_the_diagnosed_run_is_lost_by_its_fixes_and_kept_by_the_gate():
     assert runs["defaults"].metrics["final_horizontal_error_m"] > 100.0
     assert not runs["gate"].metrics["diverged"]
     assert runs["gate"].metrics["final_horizontal_error_m"] < 10.0
+
+
+def test_the_fallback_needs_the_gate_and_keeps_the_diagnosed_run():
+    """docs/filters.md 9.1: the refused fix replaced by the PF's own estimate; the diagnosed run is kept."""
+    with pytest.raises(ValidationError, match="loose_fix_prior_fallback"):
+        Scenario(filter={"loose_fix_prior_fallback": "posterior"})
+    assert Scenario(filter={"loose_fix_prior_fallback": "refuse"}).cell_key() == Scenario().cell_key()
+    sweep = load_sweep("configs/quick.yaml")
+    sc = sweep.cells[0].scenario
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
+    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
+    data = sc.model_dump(mode="json")
+    fallback = Scenario(**{**data, "filter": {**data["filter"], "loose_fix_prior_gate": 13.8,
+                                               "loose_fix_prior_fallback": "posterior"}})
+    m = run_method(fallback, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
+    assert not m.metrics["diverged"] and m.metrics["final_horizontal_error_m"] < 10.0

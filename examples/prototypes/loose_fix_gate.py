@@ -9,6 +9,7 @@ once without and once with the gate at 13.8, on the same data and seed. The arms
     .venv/bin/python examples/prototypes/loose_fix_gate.py --summary OUT.csv
     .venv/bin/python examples/prototypes/loose_fix_gate.py --diagnose SWEEP.yaml RUN [CELL [GATE]]
     .venv/bin/python examples/prototypes/loose_fix_gate.py --paired SWEEP.yaml RUNS
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --fallback OUT.csv   # section 9.1's test
 
 ``--paired`` runs every loose-dvl run of a sweep's distinct cells with the gate on and off on the
 same vehicle data and filter seed, the seeds of each cell with the gate at 13.8 in its key (the
@@ -59,18 +60,20 @@ def cells() -> dict:
     return out
 
 
-def with_gate(scenario: Scenario, gate: float | None) -> Scenario:
+def with_gate(scenario: Scenario, gate: float | None, fallback: str = "refuse") -> Scenario:
     data = scenario.model_dump(mode="json")
     data["filter"]["loose_fix_prior_gate"] = gate
+    data["filter"]["loose_fix_prior_fallback"] = fallback
     return Scenario(**data)
 
 
 def _pair(job):
-    name, scenario, root, run = job
+    name, scenario, root, run = job[:4]
+    fallback = job[4] if len(job) > 4 else "refuse"
     vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
     fseed = keyed_filter_seed(root, scenario.cell_key(), get("loose-dvl").seed_id, run)
     rows = []
-    for arm, sc in (("defaults", scenario), ("gate", with_gate(scenario, GATE))):
+    for arm, sc in (("defaults", scenario), ("gate", with_gate(scenario, GATE, fallback))):
         m = run_method(sc, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
         rows.append({"cell": name, "run": run, "arm": arm, **{k: m[k] for k in FIELDS[3:]}})
     return rows
@@ -87,6 +90,78 @@ def ablation(out_csv: str, workers: int) -> None:
                 fh.flush()
                 print(f"{i + 1} of {len(jobs)} pairs", flush=True)
     summary(out_csv)
+
+
+FALLBACK_SWEEPS = {"zhou2017": ("configs/zhou2017.yaml", 50), "ci": ("configs/ci.yaml", 80),
+                   "realism": ("configs/realism.yaml", 20)}
+
+
+def fallback_jobs() -> list:
+    """Section 9.1's design: section 9's cells, then every distinct cell of three committed sweeps with
+    their own seeds (the defaults' keys), each run at the defaults and with the gate and its fallback."""
+    jobs = [(name, sc, root, r, "posterior") for name, (sc, root, runs) in cells().items() for r in range(runs)]
+    for label, (path, runs) in FALLBACK_SWEEPS.items():
+        sweep = load_sweep(path)
+        seen = set()
+        for cell in sweep.cells:
+            if cell.cell_id in seen:
+                continue
+            seen.add(cell.cell_id)
+            jobs += [(f"{label}:{cell.cell_id[:8]}", cell.scenario, sweep.spec.seed, r, "posterior") for r in range(runs)]
+    return jobs
+
+
+def fallback_ablation(out_csv: str, workers: int) -> None:
+    jobs = fallback_jobs()
+    with open(out_csv, "w", newline="") as fh, Pool(workers) as pool:
+        writer = csv.DictWriter(fh, FIELDS)
+        writer.writeheader()
+        for i, rows in enumerate(pool.imap_unordered(_pair, jobs, chunksize=4)):
+            writer.writerows(rows)
+            if i % 200 == 0:
+                fh.flush()
+                print(f"{i + 1} of {len(jobs)} pairs", flush=True)
+    fallback_summary(out_csv)
+
+
+def _t_interval(diff):
+    from scipy import stats
+
+    mean, sem = diff.mean(), diff.std(ddof=1) / math.sqrt(diff.size)
+    t = stats.t.ppf(0.975, diff.size - 1)
+    return mean, mean - t * sem, mean + t * sem
+
+
+def fallback_summary(path: str) -> None:
+    """Section 9.1's four rules on the CSV of :func:`fallback_ablation`."""
+    import pandas as pd
+
+    df = pd.read_csv(path)
+    df["diverged"] = df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])
+    wide = df.pivot_table(index=["cell", "run"], columns="arm", values=["diverged", "final_horizontal_error_m"],
+                          aggfunc="first")
+    cell = wide.index.get_level_values("cell")
+    groups = {"fault-free (section 9 cells, zhou2017, ci)": ~cell.str.startswith(("Monterey", "realism:")),
+              "realism": cell.str.startswith("realism:"), "Monterey": cell.str.startswith("Monterey")}
+    out = {}
+    for label, mask in groups.items():
+        g = wide[mask]
+        d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", "gate")].astype(bool)
+        b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
+        kept = g[~d0 & ~d1]
+        diff = (kept[("final_horizontal_error_m", "gate")] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
+        out[label] = (len(g), int(d0.sum()), int(d1.sum()), b, c, _t_interval(diff) if diff.size > 1 else None)
+        m = out[label][5]
+        print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with the fallback {int(d1.sum())}; "
+              f"discordant b = {b} (defaults only), c = {c} (fallback only); one-sided sign test p = "
+              f"{sign_test_p(b, c):.4f}; final error fallback - defaults "
+              + (f"{m[0]:+.3f} m [{m[1]:+.3f}, {m[2]:+.3f}]" if m else "n/a"))
+    ff, re, mo = (out[k] for k in groups)
+    print(f"R1 (fault-free lost runs, p < 0.05): {'holds' if sign_test_p(ff[3], ff[4]) < 0.05 else 'fails'}")
+    print(f"R2 (realism: c <= b): {'holds' if re[4] <= re[3] else 'fails'}")
+    print(f"R3 (accuracy: fault-free upper <= +0.2 m, realism upper <= +1.0 m): "
+          f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 else 'fails'}")
+    print(f"R4 (Monterey: 0 lost with the fallback): {'holds' if mo[2] == 0 else 'fails'}")
 
 
 def sign_test_p(b: int, c: int) -> float:
@@ -217,6 +292,10 @@ if __name__ == "__main__":
     args = sys.argv[1:]
     if args[:1] == ["--summary"]:
         summary(args[1])
+    elif args[:1] == ["--fallback"]:
+        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
+    elif args[:1] == ["--fallback-summary"]:
+        fallback_summary(args[1])
     elif args[:1] == ["--paired"]:
         paired_sweep(args[1], int(args[2]))
     elif args[:1] == ["--diagnose"]:

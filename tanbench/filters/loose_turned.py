@@ -30,7 +30,9 @@ A third, ``prior_gate`` (``filter.loose_fix_prior_gate``, off by default; docs/f
 refuses a terrain-only fix whose chi-square against its own window prior
 (``eskf.fix_prior_chi2``) is not below it: the fix then disagrees with the PF's own posterior,
 an artefact of dividing two nearly equal covariances. A refused fix is recorded as rejected
-but does not count towards reopening the KF.
+but does not count towards reopening the KF. With ``prior_fallback``
+(``filter.loose_fix_prior_fallback: posterior``, docs/filters.md 9.1) such a fix is replaced by
+the PF's posterior mean with the window prior's covariance and goes on to the KF's own gates.
 Everything else (fix interval, chi-square gate, floor, reopening a locked-out KF,
 divergence, keep-on-map) is the built-in loop's.
 """
@@ -64,8 +66,9 @@ LOOSE_TURNED_COLS = np.array([E, N, YAW], dtype=np.int64)  # the rows the regula
 # beam unit vectors (m, 3) and the ranges (K, m)
 TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
 # the fix gates: the z-gyro bias limit (rad/s; inf: off), the cloud's weight inside its 95 % ellipse (0: off), the
-# sampling time (s), and the chi-square above which a terrain-only fix disagrees with its own window prior (inf: off)
-Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate", defaults=(np.inf,))
+# sampling time (s), the chi-square above which a terrain-only fix disagrees with its own window prior (inf: off), and
+# whether such a fix is replaced by the PF's posterior mean with the window prior's covariance (else refused)
+Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback", defaults=(np.inf, False))
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
 
 
@@ -174,7 +177,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
     out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
-    bias_limit, shape_min, dt, prior_gate = gates
+    bias_limit, shape_min, dt, prior_gate, prior_fallback = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]
@@ -271,8 +274,13 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
             m_prior[1] = mean_p[1]
             usable = shape_ok and terrain_only_fix(mean, cov, m_prior, p_prior, kf.fix_max_std, zt, r)
             if usable and prior_gate < np.inf and not fix_prior_chi2(zt, r, m_prior, p_prior) < prior_gate:
-                usable = False  # the fix disagrees with the cloud it came from: refused, not a KF miss
-                rejected_out[k] = 1
+                if prior_fallback:  # the cloud's own estimate, no surer than it was before the window
+                    zt[0] = mean[0]
+                    zt[1] = mean[1]
+                    copy_matrix(r, p_prior)
+                else:
+                    usable = False  # the fix disagrees with the cloud it came from: refused, not a KF miss
+                    rejected_out[k] = 1
             if usable:
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor

@@ -121,7 +121,8 @@ def _run_turned(ctx, rng, x, inc, settings, p_kf, out):
     bias_limit = (f.loose_bias_gate_sigma * f.initial_std_gyro_bias_rad_s if f.loose_bias_gate_sigma is not None
                   else np.inf)
     gates = Gates(float(bias_limit), float(f.loose_fix_shape or 0.0), float(sc.sampling_time_s),
-                  float(f.loose_fix_prior_gate) if f.loose_fix_prior_gate is not None else np.inf)
+                  float(f.loose_fix_prior_gate) if f.loose_fix_prior_gate is not None else np.inf,
+                  f.loose_fix_prior_fallback == "posterior")
     track = TurnedTrack(inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                         np.ascontiguousarray(obs.dvl_beams), np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows]))
     loose_turned_loop(x8, rng, track, likelihood_grid(f, ctx.nmap), settings, gates, p_kf, out)
