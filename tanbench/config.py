@@ -456,12 +456,24 @@ class FilterSpec(_Strict):
                               "by the PF's posterior mean with the window prior's covariance (docs/filters.md 9.1) "
                               "[refuse]")
     recovery: choices(RECOVERY) = new_option(
-        "estimate", description="tight PFs: re-draw a diverged cloud around its own estimate, or around the last "
-                                "healthy estimate moved on by dead reckoning (filters/recovery.py)")
+        "estimate", description="tight PFs: re-draw a diverged cloud around its own estimate, around the last "
+                                "healthy estimate moved on by dead reckoning (filters/recovery.py), or where a "
+                                "batch terrain match of the filter's last updates puts the vehicle "
+                                "(global; filters/relocalise.py)")
     recovery_growth_mps: float = new_option(
         0.5, ge=0, description="last-healthy recovery: growth of the re-draw square's half side per second")
     recovery_max_side_m: float = new_option(
-        1000.0, gt=0, description="last-healthy recovery: largest side of the re-draw square")
+        1000.0, gt=0, description="last-healthy recovery: largest side of the re-draw square; global recovery: "
+                                  "side of the square searched around the estimate")
+    recovery_profile_updates: int = new_option(
+        120, ge=2, le=2000, description="global recovery: updates of terrain measurements in the matched profile")
+    recovery_heading_span_deg: float = new_option(
+        90.0, ge=0, le=180, description="global recovery: largest heading rotation of the profile, either way")
+    recovery_heading_step_deg: float = new_option(
+        2.0, gt=0, le=90, description="global recovery: step between the profile's heading rotations")
+    recovery_fix_std_m: float = new_option(
+        10.0, gt=0, description="global recovery: a match whose likelihood std (TERCOM's ambiguity test) is above "
+                                "this is not used (the built-in re-draw instead)")
     # issue 24's accuracy study (docs/filters.md section 7): the likelihood's width
     range_noise: choices(RANGE_NOISE) = new_option(
         "table-2", description="every method's range (altitude) noise in the likelihood: Table 2's "

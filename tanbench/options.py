@@ -19,8 +19,8 @@ GYRO_BIAS_NOISE = ("none", "data-sheet")
 RANGE_NOISE = ("table-2", "data-sheet")
 # the map-aware likelihood's representation term: nearest-node slope term, or bilinear interpolation's own error
 MAP_REPRESENTATION = ("slope", "bilinear")
-# where the tight filter re-draws a diverged cloud (filters/recovery.py)
-RECOVERY = {"estimate": 0, "last-healthy": 1}
+# where the tight filter re-draws a diverged cloud (filters/recovery.py; global: filters/relocalise.py)
+RECOVERY = {"estimate": 0, "last-healthy": 1, "global": 2}
 DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}
 LIKELIHOOD = {"student-t": 1, "gaussian": 0}  # beam density of the map-aware kernels (filters/likelihood.py)
 LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")

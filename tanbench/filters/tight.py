@@ -50,6 +50,7 @@ from tanbench.filters.bias_walk import tight_bias_walk_std, walk_biases
 from tanbench.filters.posterior import REG_POSTERIOR, resample_posterior
 from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
 from tanbench.filters.recovery import recovery_square
+from tanbench.filters.relocalise import relocalise, relocaliser
 from tanbench.filters.resample import Resampling, add_log_weights, normalise_with_ess, resample_and_regularise, resampling_of
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
@@ -211,7 +212,7 @@ def loop_options(readings, rs) -> tuple[bool, bool]:
     return readings.propagation != 0, rs.kind != REG_POSTERIOR
 
 
-def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
+def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out, search=None):
     """Run the filter over all updates; fill the :class:`TightOutputs` ``out``.
 
     ``x`` (8, M) is the initial cloud, a column per particle; ``track`` the navigation
@@ -239,16 +240,24 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out):
     run with the defaults (the exact increments, the posterior-sized kernel) compiles neither the
     Euler step nor the shared resampling kernel (docs/speed.md, "Compiling less"); a run that sets
     either compiles the loop once more, with both.
+
+    ``search`` (``filters/relocalise.py``: :class:`GlobalSearch`, from ``global_search_of``; None unless
+    ``filter.recovery: global``): a diverged filter's cloud is re-drawn where a batch terrain match of
+    its last updates puts the vehicle (:func:`tanbench.filters.relocalise.relocalise`), the built-in
+    re-draw when the match is refused. The same way as above, the loop takes the search's bundle as
+    None without it, so the default compiles no part of it.
     """
     euler_step, shared_resampling = loop_options(settings.readings, settings.rs)
     euler_in = track.euler_in if euler_step else None
     shared_rs = settings.rs if shared_resampling else None
-    _tight_loop(x, rng, track, ranges, beams, grid, settings, out, euler_in, shared_rs)
+    reloc = None if search is None else relocaliser(search, track, beams, ranges, grid, settings.model.sig_u)
+    _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs)
 
 
 @nb.njit(cache=True)
-def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, euler_in, shared_rs):
-    """:func:`tight_filter_loop`, with ``euler_in`` the Euler-step inputs (``track.euler_in``) if
+def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs):
+    """:func:`tight_filter_loop`, with ``reloc`` the global search's ``Relocalise`` bundle
+    (``filter.recovery: global``) or None, ``euler_in`` the Euler-step inputs (``track.euler_in``) if
     ``readings.propagation`` asks for the Euler step, else None (the exact increments), and
     ``shared_rs`` the Resampling bundle if the shared kernel regularises
     (``resample.resample_and_regularise``), else None (the posterior-sized kernel)."""
@@ -336,17 +345,23 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, euler_in, sha
         collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
         if diverged or collapsed or off_map:
             centre_e, centre_n, half = mean[E], mean[N], prior.reinit_half_side
+            turn = 0.0  # the re-drawn headings' centre, from the navigation heading
             if diverged and not off_map:
                 centre_e, centre_n, half = recovery_square(div.recovery, mean[E], mean[N], healthy_e, healthy_n, dr_e,
                                                            dr_n, (k - healthy_k) * readings.dt,
                                                            prior.reinit_half_side, div.growth, div.max_half)
-            draw_tight(x, rng, centre_e, centre_n, nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k], prior, half)
+                if reloc is not None:
+                    found, match_e, match_n, match_turn = relocalise(inc, nav_up, k, mean[E], mean[N], reloc)
+                    if found:
+                        centre_e, centre_n, half, turn = match_e, match_n, prior.reinit_half_side, match_turn
+            draw_tight(x, rng, centre_e, centre_n, nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k] + turn, prior,
+                       half)
             if readings.cloud_std > 0.0:
                 gaussian_horizontal(x, rng, centre_e, centre_n, readings.cloud_std)
             logw[:] = 0.0
             bad = 0
             locked = False
-            yaw_off = 0.0  # the new cloud is drawn about the navigation heading
+            yaw_off = turn  # the new cloud is drawn about the navigation heading (turned by a global match)
             reinit_out[k] = 1
             continue
         if shared_rs is None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from tanbench.filters.cloud import gaussian_horizontal
 from tanbench.filters.likelihood import likelihood_grid
+from tanbench.filters.relocalise import global_search_of
 from tanbench.filters.rng import loop_rng
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.tight import (TightSettings, TightTrack, init_tight, new_tight_outputs, tight_filter_loop,
@@ -74,7 +75,7 @@ def run_tight(ctx: MethodContext, sensor: str, sonar=None) -> MethodOutput:
     x, rng = tight_start(ctx, settings)
     out = new_tight_outputs(ctx.updates.imu.size)
     tight_filter_loop(x, rng, tight_track(ctx), np.ascontiguousarray(ranges), np.ascontiguousarray(beams),
-                      likelihood_grid(sc.filter, ctx.nmap), settings, out)
+                      likelihood_grid(sc.filter, ctx.nmap), settings, out, global_search_of(sc.filter))
     est, var = out.est, out.var
     return MethodOutput(
         east=est[:, E], north=est[:, N], up=est[:, U], yaw=est[:, YAW],

@@ -106,7 +106,9 @@ def kernel_variant(method: str, scenario) -> str:
     :func:`tanbench.filters.rng.loop_rng` gives the loop numpy's stream), and for the tight loop
     ``euler`` and ``shared-resampling``, from :func:`tanbench.filters.tight.loop_options`, which
     also decides whether :func:`tanbench.filters.tight.tight_filter_loop` passes ``euler_in`` and
-    ``shared_rs`` as None (the Euler step and the shared kernel then compile); for loose-dvl a loop
+    ``shared_rs`` as None (the Euler step and the shared kernel then compile), and ``global-recovery``
+    (``filter.recovery: global``: the loop takes the global search's bundle instead of None,
+    :mod:`tanbench.filters.relocalise`); for loose-dvl a loop
     other than the default's, ``loose-kalman`` or ``loose-fix-only``
     (:func:`tanbench.methods.loose.loop_kind`, which also picks the loop it runs). Other options run
     in branches compiled either way."""
@@ -118,6 +120,7 @@ def kernel_variant(method: str, scenario) -> str:
     if family == "tight":
         euler_step, shared_resampling = loop_options(readings_of(f, scenario.sampling_time_s), tight_resampling_of(f))
         parts += ["euler"] * euler_step + ["shared-resampling"] * shared_resampling
+        parts += ["global-recovery"] * (f.recovery == "global")
     if family == "loose" and loose_loop_kind(f) != DEFAULT_LOOSE_LOOP:
         parts.append(f"loose-{loose_loop_kind(f)}")
     return "+".join(parts)

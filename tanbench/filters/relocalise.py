@@ -1,0 +1,213 @@
+"""Global re-localisation of a diverged tight filter by a batch terrain match (``filter.recovery: global``).
+
+When a tight filter is declared diverged (``filters/tight.py``; from its own innovations and
+spread, never from the truth) the built-in re-draws the cloud around the filter's own estimate,
+which by then may have followed a wrong path far from the vehicle (docs/filters.md 8). With
+``filter.recovery: global`` the loop first asks where the vehicle is by matching the filter's
+own last ``filter.recovery_profile_updates`` updates of terrain measurements against the map:
+
+* the profile: every beam's footprint of those updates, placed by the navigation solution's
+  relative track between them (its displacements, ``navigation/increments.py``) plus the beam
+  vector times the measured range turned into the navigation frame with the navigation
+  attitude (``filters/beams.py``), with the measured bottom height (the navigation's up, i.e.
+  the pressure depth, plus the beam's vertical part): what the vehicle observes, relative to
+  its position at the current update;
+* the search: that profile rotated about the current position by headings within
+  +-``filter.recovery_heading_span_deg`` of the navigation heading, in steps of
+  ``filter.recovery_heading_step_deg``, and translated over a square of half side
+  ``filter.recovery_max_side_m`` / 2 around the filter's estimate in steps of the map spacing,
+  scored by TERCOM's mean-removed MSD (``filters/tercom.py``: :func:`profile_surface`), then
+  refined around the best candidate at a fifth of the spacing and half the heading step;
+* the answer is refused (the built-in re-draw then applies) when the profile is shorter than
+  its length (too early in the run), when the best candidate sits on the search square's edge,
+  or when the match is ambiguous: TERCOM's test, the MSD surface turned into a likelihood has a
+  position std above ``filter.recovery_fix_std_m``
+  (:func:`tanbench.filters.tercom.surface_likelihood_moments`).
+
+An accepted match gives the position at the current update and the heading correction delta:
+the loop re-draws the cloud in the usual uniform square of ``reinit_half_side`` around that
+position, with headings about the navigation heading plus delta.
+
+The kernels take plain arrays; each has a plain-numpy reference below it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numba as nb
+import numpy as np
+
+from tanbench.filters.beams import nav_frame_offsets
+from tanbench.filters.tercom import (_best, profile_surface, profile_surface_numpy, surface_likelihood_moments,
+                                     surface_likelihood_moments_numpy)
+from tanbench.navigation.increments import D0E, D0N
+from tanbench.terrain.grid import MapArgs
+
+# the spec's side of the search (Python only): profile length in updates, half side of the
+# translation square (m), heading span and step (rad), the ambiguity test's std (m)
+GlobalSearch = namedtuple("GlobalSearch", "window half_side span step fix_std")
+
+# what the jitted loop takes: the beams' navigation-frame vectors times ranges at every update
+# (K, m, 3; NaN without a range), the map (``MapArgs``), the heading candidates (D,), the search
+# square's half side in cells and its cell (m), the profile length, the altitude std of the
+# ambiguity test's likelihood and its position std threshold
+Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step window sig_u fix_std")
+
+# refinement around the best coarse candidate: +-FINE_CELLS steps of a fifth of the map spacing (as TERCOM's)
+FINE_CELLS = 5
+FINE_DIVISOR = 5.0
+
+
+def global_search_of(f):
+    """The :class:`GlobalSearch` of a ``FilterSpec`` with ``recovery: global``, else None (the loop
+    then compiles without the search)."""
+    if f.recovery != "global":
+        return None
+    return GlobalSearch(int(f.recovery_profile_updates), f.recovery_max_side_m / 2.0,
+                        math.radians(f.recovery_heading_span_deg), math.radians(f.recovery_heading_step_deg),
+                        float(f.recovery_fix_std_m))
+
+
+def heading_candidates(span, step) -> np.ndarray:
+    """Headings -span..+span in steps of ``step`` (rad), symmetric about 0 and holding 0."""
+    half = int(math.floor(span / step + 1e-9)) if step > 0 else 0
+    return np.arange(-half, half + 1, dtype=np.float64) * step
+
+
+def map_of_grid(grid) -> MapArgs:
+    """The heights of a filter's ``NodeGrid`` as ``MapArgs`` (the first of its interleaved grids)."""
+    z = np.ascontiguousarray(np.asarray(grid.nodes).reshape(grid.ny, grid.nx, grid.grids)[:, :, 0])
+    return MapArgs(z, float(grid.e0), float(grid.n0), float(grid.inv_re), float(grid.inv_rn))
+
+
+def relocaliser(search: GlobalSearch, track, beams, ranges, grid, sig_u: float) -> Relocalise:
+    """The loop's :class:`Relocalise` bundle from the search settings, the navigation solution at the
+    updates (``TightTrack``: pitch, roll, yaw), the beams and measured ranges, and the filter's map."""
+    offsets = nav_frame_offsets(track.pitch, track.roll, track.yaw, beams, ranges)
+    zmap = map_of_grid(grid)
+    res = 1.0 / min(zmap.inv_re, zmap.inv_rn)
+    return Relocalise(offsets, zmap, heading_candidates(search.span, search.step),
+                      int(math.ceil(search.half_side / res)), float(res), int(search.window), float(sig_u),
+                      float(search.fix_std))
+
+
+@nb.njit(cache=True)
+def relative_profile(inc, offsets, up, k, window, pe, pn, ph):
+    """The profile of updates max(0, k - window + 1)..k into ``pe, pn, ph``: each beam's footprint
+    relative to the navigation position at update ``k`` (the navigation displacements ``inc[:, D0E:D0N+1]``
+    between the updates plus the beam's navigation-frame vector ``offsets[j, b, :2]``) and its measured
+    bottom height ``up[j] + offsets[j, b, 2]``; beams without a range are left out. Newest first.
+    Returns the number of points."""
+    npts = 0
+    re = 0.0
+    rn = 0.0
+    j0 = max(0, k - window + 1)
+    for j in range(k, j0 - 1, -1):
+        if j < k:
+            re -= inc[j, D0E]
+            rn -= inc[j, D0N]
+        for b in range(offsets.shape[1]):
+            h = offsets[j, b, 2]
+            if h == h:
+                pe[npts] = re + offsets[j, b, 0]
+                pn[npts] = rn + offsets[j, b, 1]
+                ph[npts] = up[j] + h
+                npts += 1
+    return npts
+
+
+def relative_profile_numpy(inc, offsets, up, k, window):
+    """Plain-numpy reference of :func:`relative_profile`: (pe, pn, ph) in the same order."""
+    j0 = max(0, k - window + 1)
+    js = np.arange(k, j0 - 1, -1)
+    # position of update j relative to update k: minus the displacements j..k-1
+    back = np.concatenate([[0.0], np.cumsum(inc[js[1:], D0E])])
+    bn = np.concatenate([[0.0], np.cumsum(inc[js[1:], D0N])])
+    pe = -back[:, None] + offsets[js, :, 0]
+    pn = -bn[:, None] + offsets[js, :, 1]
+    ph = up[js][:, None] + offsets[js, :, 2]
+    ok = ~np.isnan(offsets[js, :, 2])
+    return pe[ok], pn[ok], ph[ok]
+
+
+@nb.njit(cache=True)
+def global_match(pe, pn, ph, centre_e, centre_n, pings, reloc):
+    """Match the relative profile (``pe, pn, ph``, about the origin = the current position) over
+    the search square around (``centre_e``, ``centre_n``) and the heading candidates; ``pings`` the
+    updates it holds (the ambiguity test's independent observations).
+
+    Returns (found, east, north, delta): the current position and heading correction of the best
+    match, ``found`` False (and the centre, 0) when nothing on the map matched, the best coarse
+    candidate is on the square's edge or the match is ambiguous."""
+    deltas = reloc.deltas
+    half = reloc.half_cells
+    step = reloc.step
+    side = 2 * half + 1
+    ae = pe + centre_e
+    an = pn + centre_n
+    msd = np.empty((deltas.shape[0], side, side))
+    mad = np.empty((deltas.shape[0], side, side))
+    profile_surface(ae, an, ph, centre_e, centre_n, half, step, deltas, reloc.zmap, msd, mad)
+    best, bd, bi, bj = _best(msd)
+    if best == np.inf:
+        return False, centre_e, centre_n, 0.0
+    if bi == 0 or bj == 0 or bi == side - 1 or bj == side - 1:
+        return False, centre_e, centre_n, 0.0
+    cm = surface_likelihood_moments(msd, deltas, half, step, pings, reloc.sig_u)
+    if max(cm[2], cm[3]) > reloc.fix_std * reloc.fix_std:
+        return False, centre_e, centre_n, 0.0
+    # refine around the best coarse candidate (position and heading)
+    dstep = deltas[1] - deltas[0] if deltas.shape[0] > 1 else 0.0
+    fd = np.array([deltas[bd] - 0.5 * dstep, deltas[bd], deltas[bd] + 0.5 * dstep])
+    if deltas.shape[0] <= 1:
+        fd = np.full(1, deltas[bd])
+    cx = (bj - half) * step
+    cy = (bi - half) * step
+    fstep = step / FINE_DIVISOR
+    fside = 2 * FINE_CELLS + 1
+    fsd = np.empty((fd.shape[0], fside, fside))
+    fad = np.empty((fd.shape[0], fside, fside))
+    profile_surface(ae + cx, an + cy, ph, centre_e + cx, centre_n + cy, FINE_CELLS, fstep, fd, reloc.zmap, fsd, fad)
+    _, fbd, fbi, fbj = _best(fsd)
+    return (True, centre_e + cx + (fbj - FINE_CELLS) * fstep, centre_n + cy + (fbi - FINE_CELLS) * fstep, fd[fbd])
+
+
+def global_match_numpy(pe, pn, ph, centre_e, centre_n, pings, reloc):
+    """Plain-numpy reference of :func:`global_match` (on TERCOM's numpy references)."""
+    deltas, half, step = np.asarray(reloc.deltas), reloc.half_cells, reloc.step
+    side = 2 * half + 1
+    ae, an = np.asarray(pe) + centre_e, np.asarray(pn) + centre_n
+    msd, _ = profile_surface_numpy(ae, an, ph, centre_e, centre_n, half, step, deltas, reloc.zmap)
+    bd, bi, bj = np.unravel_index(np.argmin(msd), msd.shape)
+    if not np.isfinite(msd[bd, bi, bj]) or bi in (0, side - 1) or bj in (0, side - 1):
+        return False, centre_e, centre_n, 0.0
+    cm = surface_likelihood_moments_numpy(msd, deltas, half, step, pings, reloc.sig_u)
+    if max(cm[2], cm[3]) > reloc.fix_std**2:
+        return False, centre_e, centre_n, 0.0
+    dstep = deltas[1] - deltas[0] if len(deltas) > 1 else 0.0
+    fd = np.array([deltas[bd] - 0.5 * dstep, deltas[bd], deltas[bd] + 0.5 * dstep]) if len(deltas) > 1 else deltas[bd:bd + 1]
+    cx, cy = (bj - half) * step, (bi - half) * step
+    fstep = step / FINE_DIVISOR
+    fsd, _ = profile_surface_numpy(ae + cx, an + cy, ph, centre_e + cx, centre_n + cy, FINE_CELLS, fstep, fd, reloc.zmap)
+    fbd, fbi, fbj = np.unravel_index(np.argmin(fsd), fsd.shape)
+    return True, centre_e + cx + (fbj - FINE_CELLS) * fstep, centre_n + cy + (fbi - FINE_CELLS) * fstep, fd[fbd]
+
+
+@nb.njit(cache=True)
+def relocalise(inc, up, k, centre_e, centre_n, reloc):
+    """Where the vehicle is at update ``k`` by the profile of its last ``reloc.window`` updates
+    (:func:`relative_profile`, :func:`global_match` around the estimate ``centre_*``).
+
+    Returns (found, east, north, delta); not found before the profile is full."""
+    if k + 1 < reloc.window:
+        return False, centre_e, centre_n, 0.0
+    cap = reloc.window * reloc.offsets.shape[1]
+    pe = np.empty(cap)
+    pn = np.empty(cap)
+    ph = np.empty(cap)
+    npts = relative_profile(inc, reloc.offsets, up, k, reloc.window, pe, pn, ph)
+    if 2 * npts < reloc.window:  # fewer points than half the updates: too many dropouts to trust a match
+        return False, centre_e, centre_n, 0.0
+    return global_match(pe[:npts], pn[:npts], ph[:npts], centre_e, centre_n, min(npts, reloc.window), reloc)

@@ -1,0 +1,169 @@
+"""``filter.recovery: global`` (filters/relocalise.py): a diverged tight filter re-drawn where a batch
+terrain match of its own last updates puts the vehicle.
+
+Each kernel against its plain-numpy reference; the match finds a known position and heading on a
+toy map and refuses a flat one (TERCOM's ambiguity test); the option keeps every default cell key
+and names its own compiled variant; the tight loop runs through the search.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from filters_support import short_scenario
+from tanbench.config import Scenario
+from tanbench.filters import relocalise as rl
+from tanbench.navigation.increments import D0E, D0N, N_INCREMENTS
+from tanbench.terrain.grid import MapArgs, bilinear_numpy
+
+
+def _toy_map(flat=False, res=5.0, n=240):
+    """A smooth, non-repeating toy relief (sum of a few bumps and waves) on an n x n grid of ``res`` m."""
+    e = np.arange(n) * res
+    ee, nn = np.meshgrid(e, e)
+    z = -100.0 + 0.0 * ee
+    if not flat:
+        rng = np.random.default_rng(12)
+        for _ in range(800):
+            ce, cn = rng.uniform(0, n * res, 2)
+            z += rng.uniform(-8, 8) * np.exp(-((ee - ce) ** 2 + (nn - cn) ** 2) / (2 * rng.uniform(8, 25) ** 2))
+    return MapArgs(np.ascontiguousarray(z), 0.0, 0.0, 1.0 / res, 1.0 / res)
+
+
+def _survey(k=80, turn_deg=17.0, start=(400.0, 350.0)):
+    """True positions (k, 2) of a gently curving track at 2 m per update and the navigation's
+    displacements between them, turned by -``turn_deg`` (a navigation heading error)."""
+    heading = np.radians(30.0) + np.linspace(0.0, np.radians(50.0), k)
+    d = 2.0 * np.stack([np.sin(heading), np.cos(heading)], axis=1)
+    truth = np.asarray(start) + np.concatenate([[[0.0, 0.0]], np.cumsum(d[:-1], axis=0)])
+    c, s = math.cos(math.radians(-turn_deg)), math.sin(math.radians(-turn_deg))
+    step = np.diff(truth, axis=0)
+    inc = np.zeros((k - 1, N_INCREMENTS))
+    inc[:, D0E] = c * step[:, 0] - s * step[:, 1]
+    inc[:, D0N] = s * step[:, 0] + c * step[:, 1]
+    return truth, inc
+
+
+def _reloc(zmap, offsets, window, half_side=150.0, fix_std=10.0, span_deg=30.0, step_deg=2.0):
+    res = 1.0 / zmap.inv_re
+    return rl.Relocalise(offsets, zmap, rl.heading_candidates(math.radians(span_deg), math.radians(step_deg)),
+                         int(math.ceil(half_side / res)), res, window, 1.0, fix_std)
+
+
+def test_heading_candidates():
+    d = rl.heading_candidates(math.radians(90.0), math.radians(2.0))
+    assert d.size == 91 and d[45] == 0.0 and d[0] == pytest.approx(-math.pi / 2) and d[-1] == pytest.approx(math.pi / 2)
+    np.testing.assert_array_equal(d, -d[::-1])
+    assert rl.heading_candidates(0.0, math.radians(2.0)).tolist() == [0.0]
+
+
+def test_relative_profile_matches_numpy():
+    rng = np.random.default_rng(3)
+    k_all, m = 50, 4
+    inc = rng.normal(size=(k_all - 1, N_INCREMENTS))
+    offsets = rng.normal(size=(k_all, m, 3))
+    offsets[rng.random((k_all, m)) < 0.2] = np.nan  # beams without a range
+    up = rng.normal(size=k_all)
+    for k, window in ((49, 20), (10, 20), (0, 5), (30, 31)):
+        pe, pn, ph = np.empty(window * m), np.empty(window * m), np.empty(window * m)
+        npts = rl.relative_profile(inc, offsets, up, k, window, pe, pn, ph)
+        ref = rl.relative_profile_numpy(inc, offsets, up, k, window)
+        assert npts == ref[0].size
+        for got, want in zip((pe, pn, ph), ref):
+            np.testing.assert_allclose(got[:npts], want, rtol=0, atol=1e-12)
+    # the newest point is the current footprint
+    assert pe[0] == offsets[30, 0, 0] or np.isnan(offsets[30, 0, 2])
+
+
+def _single_beam_case(zmap, turn_deg=17.0, k_all=80, noise=0.0):
+    truth, inc = _survey(k_all, turn_deg)
+    offsets = np.zeros((k_all, 1, 3))
+    offsets[:, 0, 2] = -30.0  # a vertical beam, 30 m range (the vehicle 30 m above the bottom)
+    bottom = bilinear_numpy(*zmap, truth[:, 0], truth[:, 1]) + noise * np.random.default_rng(8).normal(size=k_all)
+    up = bottom + 30.0
+    return truth, inc, offsets, up
+
+
+def test_global_match_finds_position_and_heading():
+    zmap = _toy_map()
+    truth, inc, offsets, up = _single_beam_case(zmap, noise=0.3)
+    k, window = 79, 60
+    reloc = _reloc(zmap, offsets, window)
+    est = truth[k] + np.array([110.0, -85.0])  # a diverged estimate far off
+    found, e, n, delta = rl.relocalise(inc, up, k, est[0], est[1], reloc)
+    assert found
+    assert math.hypot(e - truth[k, 0], n - truth[k, 1]) < 4.0
+    assert math.degrees(delta) == pytest.approx(17.0, abs=5.0)
+
+
+def test_global_match_matches_numpy():
+    zmap = _toy_map()
+    truth, inc, offsets, up = _single_beam_case(zmap, noise=0.3)
+    k, window = 79, 60
+    reloc = _reloc(zmap, offsets, window, half_side=100.0, span_deg=20.0, step_deg=4.0)
+    pe, pn, ph = rl.relative_profile_numpy(inc, offsets, up, k, window)
+    for centre in (truth[k] + [60.0, 40.0], truth[k] - [30.0, 70.0], truth[k] + [99.0, 0.0]):
+        got = rl.global_match(pe, pn, ph, centre[0], centre[1], window, reloc)
+        want = rl.global_match_numpy(pe, pn, ph, centre[0], centre[1], window, reloc)
+        assert got[0] == want[0]
+        np.testing.assert_allclose(got[1:], want[1:], rtol=0, atol=1e-9)
+
+
+def test_ambiguous_or_early_match_is_refused():
+    flat = _toy_map(flat=True)
+    truth, inc, offsets, up = _single_beam_case(flat)
+    reloc = _reloc(flat, offsets, 60)
+    assert not rl.relocalise(inc, up, 79, truth[79, 0] + 50.0, truth[79, 1], reloc)[0]  # flat: ambiguous
+    pe, pn, ph = rl.relative_profile_numpy(inc, offsets, up, 79, 60)
+    assert not rl.global_match_numpy(pe, pn, ph, truth[79, 0] + 50.0, truth[79, 1], 60, reloc)[0]
+    zmap = _toy_map()
+    truth, inc, offsets, up = _single_beam_case(zmap)
+    reloc = _reloc(zmap, offsets, 60)
+    assert not rl.relocalise(inc, up, 40, truth[40, 0], truth[40, 1], reloc)[0]  # the profile is not full yet
+    assert rl.relocalise(inc, up, 79, truth[79, 0], truth[79, 1], reloc)[0]
+
+
+def test_the_option_keeps_default_keys_and_names_its_variant():
+    from tanbench.runner import plan
+
+    assert Scenario().cell_key() == Scenario(filter={"recovery": "estimate", "recovery_profile_updates": 120,
+                                                     "recovery_heading_span_deg": 90.0,
+                                                     "recovery_heading_step_deg": 2.0,
+                                                     "recovery_fix_std_m": 10.0}).cell_key()
+    scenario = Scenario(filter={"recovery": "global"})
+    assert scenario.cell_key() != Scenario().cell_key()
+    assert rl.global_search_of(Scenario().filter) is None
+    search = rl.global_search_of(scenario.filter)
+    assert search.window == 120 and search.half_side == 500.0
+    assert plan.kernel_variant("tight-sbe", scenario) == "global-recovery"
+    assert plan.kernel_variant("tight-sbe", Scenario()) == ""
+    assert plan.kernel_variant("loose-dvl", scenario) == ""
+
+
+def test_map_of_grid_reads_the_heights():
+    from tanbench.terrain.grid import node_grid_of
+
+    zmap = _toy_map(n=30)
+    for z2 in (None, np.ones_like(zmap.z)):
+        got = rl.map_of_grid(node_grid_of(*zmap, z2=z2))
+        np.testing.assert_array_equal(got.z, zmap.z)
+        assert got[1:] == tuple(zmap[1:])
+
+
+@pytest.mark.parametrize("name", ["tight-sbe"])
+def test_tight_loop_runs_through_the_search(name):
+    """A filter made to diverge often (a tight divergence test) runs through the global search."""
+    from tanbench.methods import get, method_context
+    from tanbench.runner.seeds import vehicle_seed
+    from tanbench.simulation import simulate_vehicle
+
+    scenario = short_scenario(duration_s=120.0, particles=300,
+                              filter={"recovery": "global", "recovery_profile_updates": 30,
+                                      "divergence_sigma": 0.5, "divergence_steps": 2})
+    vehicle = simulate_vehicle(scenario, vehicle_seed(11, scenario, 0))
+    out = get(name).run(method_context(scenario, name, vehicle, np.random.SeedSequence(5, spawn_key=(0, 2)), get(name)))
+    assert np.all(np.isfinite(out.east)) and np.all(np.isfinite(out.north))
+    assert out.reinit[30:].sum() > 0
