@@ -466,7 +466,8 @@ class FilterSpec(_Strict):
         1000.0, gt=0, description="last-healthy recovery: largest side of the re-draw square; global recovery: "
                                   "side of the square searched around the estimate")
     recovery_profile_updates: int = new_option(
-        120, ge=2, le=2000, description="global recovery: updates of terrain measurements in the matched profile")
+        240, ge=2, le=2000, description="global recovery: updates of terrain measurements in the matched profile "
+                                         "(all so far while fewer, from 120 on)")
     recovery_heading_span_deg: float = new_option(
         90.0, ge=0, le=180, description="global recovery: largest heading rotation of the profile, either way")
     recovery_heading_step_deg: float = new_option(

@@ -126,10 +126,22 @@ def test_ambiguous_or_early_match_is_refused():
     assert rl.relocalise(inc, up, 79, truth[79, 0], truth[79, 1], reloc)[0]
 
 
+def test_a_match_at_the_end_of_the_headings_is_refused():
+    """A vehicle turned beyond the headings searched: the best candidate sits at their end, refused."""
+    zmap = _toy_map()
+    truth, inc, offsets, up = _single_beam_case(zmap, turn_deg=40.0)
+    reloc = _reloc(zmap, offsets, 60, half_side=15.0, span_deg=20.0)  # a small square about the truth
+    pe, pn, ph = rl.relative_profile_numpy(inc, offsets, up, 79, 60)
+    assert not rl.relocalise(inc, up, 79, truth[79, 0], truth[79, 1], reloc)[0]
+    assert not rl.global_match_numpy(pe, pn, ph, truth[79, 0], truth[79, 1], 60, reloc)[0]
+    wide = _reloc(zmap, offsets, 60, half_side=15.0, span_deg=50.0)
+    assert rl.relocalise(inc, up, 79, truth[79, 0], truth[79, 1], wide)[0]
+
+
 def test_the_option_keeps_default_keys_and_names_its_variant():
     from tanbench.runner import plan
 
-    assert Scenario().cell_key() == Scenario(filter={"recovery": "estimate", "recovery_profile_updates": 120,
+    assert Scenario().cell_key() == Scenario(filter={"recovery": "estimate", "recovery_profile_updates": 240,
                                                      "recovery_heading_span_deg": 90.0,
                                                      "recovery_heading_step_deg": 2.0,
                                                      "recovery_fix_std_m": 10.0}).cell_key()
@@ -137,7 +149,7 @@ def test_the_option_keeps_default_keys_and_names_its_variant():
     assert scenario.cell_key() != Scenario().cell_key()
     assert rl.global_search_of(Scenario().filter) is None
     search = rl.global_search_of(scenario.filter)
-    assert search.window == 120 and search.half_side == 500.0
+    assert search.window == 240 and search.half_side == 500.0
     assert plan.kernel_variant("tight-sbe", scenario) == "global-recovery"
     assert plan.kernel_variant("tight-sbe", Scenario()) == ""
     assert plan.kernel_variant("loose-dvl", scenario) == ""

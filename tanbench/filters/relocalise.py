@@ -11,18 +11,20 @@ own last ``filter.recovery_profile_updates`` updates of terrain measurements aga
   vector times the measured range turned into the navigation frame with the navigation
   attitude (``filters/beams.py``), with the measured bottom height (the navigation's up, i.e.
   the pressure depth, plus the beam's vertical part): what the vehicle observes, relative to
-  its position at the current update;
+  its position at the current update (all the updates so far while the run is younger than
+  the profile);
 * the search: that profile rotated about the current position by headings within
   +-``filter.recovery_heading_span_deg`` of the navigation heading, in steps of
   ``filter.recovery_heading_step_deg``, and translated over a square of half side
   ``filter.recovery_max_side_m`` / 2 around the filter's estimate in steps of the map spacing,
   scored by TERCOM's mean-removed MSD (``filters/tercom.py``: :func:`profile_surface`), then
   refined around the best candidate at a fifth of the spacing and half the heading step;
-* the answer is refused (the built-in re-draw then applies) when the profile is shorter than
-  its length (too early in the run), when the best candidate sits on the search square's edge,
-  or when the match is ambiguous: TERCOM's test, the MSD surface turned into a likelihood has a
-  position std above ``filter.recovery_fix_std_m``
-  (:func:`tanbench.filters.tercom.surface_likelihood_moments`).
+* the answer is refused (the built-in re-draw then applies) when fewer than ``MIN_UPDATES``
+  updates (or the profile's length, if shorter) have been made (too early in the run), when
+  the best candidate sits on the search square's edge or at either end of the headings searched
+  (the vehicle may be beyond them), or when the match is ambiguous (TERCOM's
+  test: the MSD surface turned into a likelihood has a position std above
+  ``filter.recovery_fix_std_m``; :func:`tanbench.filters.tercom.surface_likelihood_moments`).
 
 An accepted match gives the position at the current update and the heading correction delta:
 the loop re-draws the cloud in the usual uniform square of ``reinit_half_side`` around that
@@ -58,6 +60,8 @@ Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step windo
 # refinement around the best coarse candidate: +-FINE_CELLS steps of a fifth of the map spacing (as TERCOM's)
 FINE_CELLS = 5
 FINE_DIVISOR = 5.0
+# a profile shorter than this many updates (early in a run) is not matched
+MIN_UPDATES = 120
 
 
 def global_search_of(f):
@@ -140,7 +144,8 @@ def global_match(pe, pn, ph, centre_e, centre_n, pings, reloc):
 
     Returns (found, east, north, delta): the current position and heading correction of the best
     match, ``found`` False (and the centre, 0) when nothing on the map matched, the best coarse
-    candidate is on the square's edge or the match is ambiguous."""
+    candidate is on the square's edge or at either end of the heading candidates, or the match
+    is ambiguous."""
     deltas = reloc.deltas
     half = reloc.half_cells
     step = reloc.step
@@ -154,6 +159,8 @@ def global_match(pe, pn, ph, centre_e, centre_n, pings, reloc):
     if best == np.inf:
         return False, centre_e, centre_n, 0.0
     if bi == 0 or bj == 0 or bi == side - 1 or bj == side - 1:
+        return False, centre_e, centre_n, 0.0
+    if deltas.shape[0] > 1 and (bd == 0 or bd == deltas.shape[0] - 1):
         return False, centre_e, centre_n, 0.0
     cm = surface_likelihood_moments(msd, deltas, half, step, pings, reloc.sig_u)
     if max(cm[2], cm[3]) > reloc.fix_std * reloc.fix_std:
@@ -183,6 +190,8 @@ def global_match_numpy(pe, pn, ph, centre_e, centre_n, pings, reloc):
     bd, bi, bj = np.unravel_index(np.argmin(msd), msd.shape)
     if not np.isfinite(msd[bd, bi, bj]) or bi in (0, side - 1) or bj in (0, side - 1):
         return False, centre_e, centre_n, 0.0
+    if len(deltas) > 1 and bd in (0, len(deltas) - 1):
+        return False, centre_e, centre_n, 0.0
     cm = surface_likelihood_moments_numpy(msd, deltas, half, step, pings, reloc.sig_u)
     if max(cm[2], cm[3]) > reloc.fix_std**2:
         return False, centre_e, centre_n, 0.0
@@ -197,17 +206,20 @@ def global_match_numpy(pe, pn, ph, centre_e, centre_n, pings, reloc):
 
 @nb.njit(cache=True)
 def relocalise(inc, up, k, centre_e, centre_n, reloc):
-    """Where the vehicle is at update ``k`` by the profile of its last ``reloc.window`` updates
-    (:func:`relative_profile`, :func:`global_match` around the estimate ``centre_*``).
+    """Where the vehicle is at update ``k`` by the profile of its last ``reloc.window`` updates, or
+    of all its updates so far if fewer (:func:`relative_profile`, :func:`global_match` around the
+    estimate ``centre_*``).
 
-    Returns (found, east, north, delta); not found before the profile is full."""
-    if k + 1 < reloc.window:
+    Returns (found, east, north, delta); not found with fewer than ``min(MIN_UPDATES, window)``
+    updates so far, or fewer points than half the profile's updates (dropouts)."""
+    updates = min(k + 1, reloc.window)
+    if updates < min(MIN_UPDATES, reloc.window):
         return False, centre_e, centre_n, 0.0
-    cap = reloc.window * reloc.offsets.shape[1]
+    cap = updates * reloc.offsets.shape[1]
     pe = np.empty(cap)
     pn = np.empty(cap)
     ph = np.empty(cap)
-    npts = relative_profile(inc, reloc.offsets, up, k, reloc.window, pe, pn, ph)
-    if 2 * npts < reloc.window:  # fewer points than half the updates: too many dropouts to trust a match
+    npts = relative_profile(inc, reloc.offsets, up, k, updates, pe, pn, ph)
+    if 2 * npts < updates:
         return False, centre_e, centre_n, 0.0
-    return global_match(pe[:npts], pn[:npts], ph[:npts], centre_e, centre_n, min(npts, reloc.window), reloc)
+    return global_match(pe[:npts], pn[:npts], ph[:npts], centre_e, centre_n, min(npts, updates), reloc)
