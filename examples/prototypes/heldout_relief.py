@@ -11,6 +11,7 @@ map, the survey) is tanbench's own options.
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --second   # J9-J16
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --third    # J17-J24 (40 m second scale)
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --all      # J1-J24
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --unseen   # J25-J40 (section 10's test worlds)
     .venv/bin/tanbench run OUT_DIR/J1.yaml --out OUT_DIR/J1 --quiet --series none
     .venv/bin/python examples/prototypes/heldout_relief.py --summary RESULTS_DIR   # a table of RESULTS_DIR/J*/
 
@@ -38,6 +39,12 @@ SETS = {  # name -> (first world number, centres, the second scale's node spacin
     "first": (1, CENTRES, 24.0, range(24240011, 24240019)),
     "second": (9, SECOND_CENTRES, 24.0, range(24240019, 24240027)),
     "third": (17, THIRD_CENTRES, 40.0, range(24240027, 24240035)),
+}
+# the test worlds of docs/filters.md section 10 (global recovery), fixed before any run on them: other centres,
+# and two more scales (32 m and 16 m); `--unseen` builds them, `--all` (make heldout-relief) does not
+UNSEEN_SETS = {
+    "fourth": (25, ((0.35, 0.15), (0.65, 0.85), (0.12, 0.35), (0.88, 0.62)), 32.0, range(24240035, 24240043)),
+    "fifth": (33, ((0.45, 0.3), (0.55, 0.7), (0.3, 0.45), (0.7, 0.55)), 16.0, range(24240043, 24240051)),
 }
 
 
@@ -92,7 +99,7 @@ def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) ->
 def main(out: Path, which: str = "first") -> None:
     out.mkdir(parents=True, exist_ok=True)
     z, dx, dy = read_dem()
-    first, centres, spacing, seed_range = SETS[which]
+    first, centres, spacing, seed_range = {**SETS, **UNSEEN_SETS}[which]
     scales = ((dx, dy), (spacing, spacing))
     seeds = iter(seed_range)
     k = first - 1
@@ -101,6 +108,8 @@ def main(out: Path, which: str = "first") -> None:
             k += 1
             name = f"J{k}"
             w = window(z, res_e, res_n, fe, fn)
+            if w.shape != (int(round(WINDOW_M / res_n)) + 1, int(round(WINDOW_M / res_e)) + 1):
+                raise SystemExit(f"{name}: the window at {fe}, {fn} does not fit in the DEM at {res_e:.1f} m")
             npz = out / f"{name}.npz"
             np.savez(npz, z=w, e0=0.0, n0=0.0, res_e=res_e, res_n=res_n)
             centre = (0.5 * (w.shape[1] - 1) * res_e, 0.5 * (w.shape[0] - 1) * res_n)
@@ -155,6 +164,9 @@ if __name__ == "__main__":
         print(summary(Path(args[1])), end="")
     elif len(args) == 2 and args[1] == "--all":
         for which in SETS:
+            main(Path(args[0]), which)
+    elif len(args) == 2 and args[1] == "--unseen":
+        for which in UNSEEN_SETS:
             main(Path(args[0]), which)
     elif len(args) in (1, 2) and (len(args) == 1 or args[1] in ("--second", "--third")):
         main(Path(args[0]), args[1][2:] if len(args) == 2 else "first")

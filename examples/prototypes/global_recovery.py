@@ -1,0 +1,149 @@
+"""``filter.recovery: global`` against the defaults (docs/filters.md section 10): the paired test.
+
+Every run's vehicle data and filter seed are those of the defaults' keys; each tight method of a
+cell runs once at the defaults and once with ``recovery: global`` on the same data and seed, so a
+pair differs only where a divergence fired (the search runs only then). The test worlds J25-J40
+(``heldout_relief.py OUT --unseen``) and the guards (every distinct cell of five committed sweeps)
+are fixed in section 10. Writes one CSV row per (group, cell, run, method, arm) and prints the
+section's rules.
+
+    .venv/bin/python examples/prototypes/heldout_relief.py .cache/unseen-relief --unseen
+    .venv/bin/python examples/prototypes/global_recovery.py OUT.csv [--workers 2]
+    .venv/bin/python examples/prototypes/global_recovery.py --summary OUT.csv
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+
+from loose_fix_gate import _t_interval, sign_test_p
+from tanbench.config import Scenario
+from tanbench.methods import get, run_method
+from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
+from tanbench.simulation import simulate_vehicle
+from tanbench.sweep import load_sweep
+
+UNSEEN_DIR = Path(".cache/unseen-relief")
+UNSEEN_WORLDS = [f"J{k}" for k in range(25, 41)]
+GUARDS = {  # group -> (sweep, runs per distinct cell)
+    "zhou2017": ("configs/zhou2017.yaml", 50), "ci": ("configs/ci.yaml", 80), "realism": ("configs/realism.yaml", 20),
+    "monterey": ("configs/monterey.yaml", 20), "multibeam": ("configs/multibeam.yaml", 10),
+}
+TIGHT = ("tight-dvl", "tight-sbe", "tight-mbe")
+FIELDS = ["group", "cell", "run", "method", "arm", "diverged", "final_horizontal_error_m", "mean_horizontal_error_m",
+          "reinitialisations", "recoveries", "filter_wall_s"]
+
+
+def with_global(scenario: Scenario) -> Scenario:
+    data = scenario.model_dump(mode="json")
+    data["filter"]["recovery"] = "global"
+    return Scenario(**data)
+
+
+def jobs() -> list:
+    out = []
+    sweeps = [(w, str(UNSEEN_DIR / f"{w}.yaml"), 10) for w in UNSEEN_WORLDS]
+    sweeps += [(group, path, runs) for group, (path, runs) in GUARDS.items()]
+    for group, path, runs in sweeps:
+        sweep = load_sweep(path)
+        methods = [m for m in sweep.spec.methods if m in TIGHT]
+        seen = set()
+        for cell in sweep.cells:
+            if cell.cell_id in seen:
+                continue
+            seen.add(cell.cell_id)
+            label = "unseen" if group.startswith("J") else group
+            name = group if label == "unseen" else f"{group}:{cell.cell_id[:8]}"
+            out += [(label, name, cell.scenario, sweep.spec.seed, r, methods) for r in range(runs)]
+    return out
+
+
+def _pair(job):
+    group, name, scenario, root, run, methods = job
+    vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
+    rows = []
+    for method in methods:
+        fseed = keyed_filter_seed(root, scenario.cell_key(), get(method).seed_id, run)
+        for arm, sc in (("defaults", scenario), ("global", with_global(scenario))):
+            m = run_method(sc, method, vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+            rows.append({"group": group, "cell": name, "run": run, "method": method, "arm": arm,
+                         **{k: m[k] for k in FIELDS[5:]}})
+    return rows
+
+
+def run(out_csv: str, workers: int) -> None:
+    todo = jobs()
+    with open(out_csv, "w", newline="") as fh, Pool(workers) as pool:
+        writer = csv.DictWriter(fh, FIELDS)
+        writer.writeheader()
+        for i, rows in enumerate(pool.imap_unordered(_pair, todo, chunksize=2)):
+            writer.writerows(rows)
+            if i % 200 == 0:
+                fh.flush()
+                print(f"{i + 1} of {len(todo)} runs", flush=True)
+    summary(out_csv)
+
+
+def summary(path: str) -> None:
+    """Section 10's rules on the CSV of :func:`run`."""
+    import pandas as pd
+
+    df = pd.read_csv(path)
+    df["diverged"] = df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])
+    wide = df.pivot_table(index=["group", "cell", "run", "method"], columns="arm",
+                          values=["diverged", "final_horizontal_error_m", "reinitialisations", "filter_wall_s"],
+                          aggfunc="first")
+    group = wide.index.get_level_values("group")
+    sets = {"unseen worlds J25-J40": group == "unseen",
+            "fault-free guards (zhou2017, ci, monterey, multibeam)": group.isin(["zhou2017", "ci", "monterey",
+                                                                                  "multibeam"]),
+            "realism (world faults)": group == "realism", "monterey": group == "monterey"}
+    out = {}
+    for label, mask in sets.items():
+        g = wide[mask]
+        d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", "global")].astype(bool)
+        b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
+        kept = g[~d0 & ~d1]
+        diff = (kept[("final_horizontal_error_m", "global")] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
+        ci = _t_interval(diff) if diff.size > 1 and diff.std() > 0 else (float(diff.mean()) if diff.size else 0.0,) * 3
+        out[label] = (len(g), int(d0.sum()), int(d1.sum()), b, c, ci)
+        wall = g[("filter_wall_s", "global")].sum() / g[("filter_wall_s", "defaults")].sum()
+        print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with global {int(d1.sum())}; "
+              f"discordant b = {b} (defaults only), c = {c} (global only); one-sided sign test p = "
+              f"{sign_test_p(b, c):.4f}; final error global - defaults {ci[0]:+.3f} m [{ci[1]:+.3f}, {ci[2]:+.3f}] "
+              f"({diff.size} kept in both); reinitialisations {int(g[('reinitialisations', 'defaults')].sum())} / "
+              f"{int(g[('reinitialisations', 'global')].sum())}; filter time x{wall:.2f}")
+    un, ff, re, mo = (out[k] for k in sets)
+    print(f"R1 (unseen worlds, lost runs, p < 0.05): "
+          f"{'holds' if sign_test_p(un[3], un[4]) < 0.05 else 'fails'}")
+    print(f"R2 (guards: c <= b, fault-free and realism each): {'holds' if ff[4] <= ff[3] and re[4] <= re[3] else 'fails'}")
+    print(f"R3 (accuracy upper bounds: fault-free <= +0.2 m, realism <= +1.0 m, unseen <= +1.0 m): "
+          f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 and un[5][2] <= 1.0 else 'fails'}")
+    print(f"R4 (Monterey: 0 lost with global): {'holds' if mo[2] == 0 else 'fails'}")
+    print("\nissue 24's real-relief target on the unseen worlds (at most tight-dvl 0, tight-sbe 1 lost of 10; "
+          "no final error above 200 m), lost / largest final error:")
+    u = df[df["group"] == "unseen"]
+    print("| world | " + " | ".join(f"{m} {a}" for m in ("tight-dvl", "tight-sbe") for a in ("defaults", "global"))
+          + " |\n|---|---|---|---|---|")
+    for world, g in u.groupby("cell", sort=False):
+        cells = []
+        for m in ("tight-dvl", "tight-sbe"):
+            for a in ("defaults", "global"):
+                s = g[(g["method"] == m) & (g["arm"] == a)]
+                cells.append(f"{int(s['diverged'].sum())} ({s['final_horizontal_error_m'].max():.1f} m)")
+        print(f"| {world} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    if args[:1] == ["--summary"]:
+        summary(args[1])
+    elif len(args) in (1, 3):
+        run(args[0], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
+    else:
+        raise SystemExit(__doc__)
