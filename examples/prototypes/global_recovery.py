@@ -14,14 +14,12 @@ section's rules.
 
 from __future__ import annotations
 
-import csv
 import sys
-from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
 
-from loose_fix_gate import _t_interval, sign_test_p
+from loose_fix_gate import _t_interval, sign_test_p, write_rows
 from tanbench.config import Scenario
 from tanbench.methods import get, run_method
 from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
@@ -77,15 +75,7 @@ def _pair(job):
 
 
 def run(out_csv: str, workers: int) -> None:
-    todo = jobs()
-    with open(out_csv, "w", newline="") as fh, Pool(workers) as pool:
-        writer = csv.DictWriter(fh, FIELDS)
-        writer.writeheader()
-        for i, rows in enumerate(pool.imap_unordered(_pair, todo, chunksize=2)):
-            writer.writerows(rows)
-            if i % 200 == 0:
-                fh.flush()
-                print(f"{i + 1} of {len(todo)} runs", flush=True)
+    write_rows(out_csv, FIELDS, _pair, jobs(), workers, chunksize=2)
     summary(out_csv)
 
 

@@ -79,16 +79,21 @@ def _pair(job):
     return rows
 
 
-def ablation(out_csv: str, workers: int) -> None:
-    jobs = [(name, sc, root, r) for name, (sc, root, runs) in cells().items() for r in range(runs)]
+def write_rows(out_csv: str, fields: list, worker, jobs: list, workers: int, chunksize: int = 4) -> None:
+    """Run ``worker`` over ``jobs`` in a pool and write the rows each returns to ``out_csv``, with progress."""
     with open(out_csv, "w", newline="") as fh, Pool(workers) as pool:
-        writer = csv.DictWriter(fh, FIELDS)
+        writer = csv.DictWriter(fh, fields)
         writer.writeheader()
-        for i, rows in enumerate(pool.imap_unordered(_pair, jobs, chunksize=4)):
+        for i, rows in enumerate(pool.imap_unordered(worker, jobs, chunksize=chunksize)):
             writer.writerows(rows)
             if i % 100 == 0:
                 fh.flush()
-                print(f"{i + 1} of {len(jobs)} pairs", flush=True)
+                print(f"{i + 1} of {len(jobs)} jobs", flush=True)
+
+
+def ablation(out_csv: str, workers: int) -> None:
+    jobs = [(name, sc, root, r) for name, (sc, root, runs) in cells().items() for r in range(runs)]
+    write_rows(out_csv, FIELDS, _pair, jobs, workers)
     summary(out_csv)
 
 
@@ -112,15 +117,7 @@ def fallback_jobs() -> list:
 
 
 def fallback_ablation(out_csv: str, workers: int) -> None:
-    jobs = fallback_jobs()
-    with open(out_csv, "w", newline="") as fh, Pool(workers) as pool:
-        writer = csv.DictWriter(fh, FIELDS)
-        writer.writeheader()
-        for i, rows in enumerate(pool.imap_unordered(_pair, jobs, chunksize=4)):
-            writer.writerows(rows)
-            if i % 200 == 0:
-                fh.flush()
-                print(f"{i + 1} of {len(jobs)} pairs", flush=True)
+    write_rows(out_csv, FIELDS, _pair, fallback_jobs(), workers)
     fallback_summary(out_csv)
 
 
