@@ -18,6 +18,7 @@ from pathlib import Path
 from tanbench import kernel_cache
 from tanbench.config import FilterSpec
 from tanbench.errors import TanbenchError
+from tanbench.filters.relocalise import global_search_of
 from tanbench.filters.tight import loop_options, readings_of, tight_resampling_of
 from tanbench.methods.loose import loop_kind as loose_loop_kind
 from tanbench.methods.registry import builtin_names, get
@@ -120,7 +121,7 @@ def kernel_variant(method: str, scenario) -> str:
     if family == "tight":
         euler_step, shared_resampling = loop_options(readings_of(f, scenario.sampling_time_s), tight_resampling_of(f))
         parts += ["euler"] * euler_step + ["shared-resampling"] * shared_resampling
-        parts += ["global-recovery"] * (f.recovery == "global")
+        parts += ["global-recovery"] * (global_search_of(f) is not None)
     if family == "loose" and loose_loop_kind(f) != DEFAULT_LOOSE_LOOP:
         parts.append(f"loose-{loose_loop_kind(f)}")
     return "+".join(parts)
