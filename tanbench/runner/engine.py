@@ -19,6 +19,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import os
+import signal
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, wait
@@ -38,6 +39,7 @@ from tanbench.runner.executors import open_executor, warm_up, warm_up_side_by_si
 from tanbench.runner.plan import (Plan, builtin_methods, cell_kernels, check_series_mode, compile_groups,
                                   compile_processes, cpu_load_now, machine_compile_seconds, make_plan, share_of_each)
 from tanbench.runner.resume import ResumeState
+from tanbench.runner.stop_requests import POLL_S, noted_stop_requests
 from tanbench.runner.tasks import Task, TaskResult, cell_scenario, execute
 from tanbench.runner.validate import check_output, validate_sweep
 from tanbench.schema import METRIC_COLUMNS, rows_table
@@ -307,48 +309,53 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
     if scheduler in (None, "local-dask"):
         compile_kernels(plan, remaining, progress, note, truth_maps)
     bar = None
-    try:
-        for start in range(1, MAX_POOL_STARTS + 1):
-            # the executor first: if it cannot start (a Dask address that does not answer), the
-            # user sees its one error line and no half-drawn progress bar
-            with open_executor(workers, scheduler, truth_maps, worlds, remaining[0].scenario_json,
-                               tuple(plan.sweep.spec.methods)) as handle:
-                store.write_text(plan.sweep.text, plan.out / "sweep.yaml")
-                # submitted before the bar is drawn: a forked pool starts its workers at the first submit,
-                # and the bar starts a thread (executors.local_context forks only a single-threaded process)
-                pending = {handle.executor.submit(execute, task): task for task in remaining}
-                if bar is None:
-                    bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
-                               dynamic_ncols=True, smoothing=0.05, desc=f"{plan.sweep.name} on {handle.description}")
-                lost, reason = [], ""
-                try:
-                    while pending:
-                        finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
-                        for fut in finished:
-                            task = pending.pop(fut)
-                            failure = fut.exception()  # execute never raises: this is the worker's end
-                            if failure is not None:
-                                lost.append(task)
-                                reason = reason or describe_exception(failure)
-                                continue
-                            result = store_result(fut.result(), plan, state, columns, meta, full_series, written)
-                            failed = [r for r in result.rows if r["status"] != "ok"]
-                            report.failed_rows += len(failed)
-                            report.errors += [f"{r['cell_id']} run {r['run']} {r['method']}: {r['error']}"
-                                              for r in failed]
-                            report.finished += 1
-                            bar.update(n_methods)
-                except KeyboardInterrupt:
-                    report.interrupted = True
-                    handle.stop_now()
+    with noted_stop_requests() as stop:
+        try:
+            for start in range(1, MAX_POOL_STARTS + 1):
+                # the executor first: if it cannot start (a Dask address that does not answer), the
+                # user sees its one error line and no half-drawn progress bar
+                with open_executor(workers, scheduler, truth_maps, worlds, remaining[0].scenario_json,
+                                   tuple(plan.sweep.spec.methods)) as handle:
+                    store.write_text(plan.sweep.text, plan.out / "sweep.yaml")
+                    # submitted before the bar is drawn: a forked pool starts its workers at the first submit,
+                    # and the bar starts a thread (executors.local_context forks only a single-threaded process)
+                    pending = {handle.executor.submit(execute, task): task for task in remaining}
+                    if bar is None:
+                        bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
+                                   dynamic_ncols=True, smoothing=0.05,
+                                   desc=f"{plan.sweep.name} on {handle.description}")
+                    lost, reason = [], ""
+                    try:
+                        while pending and not stop.requested:
+                            # a timeout, so that a stop request is seen within POLL_S (stop_requests)
+                            finished, _ = wait(list(pending), timeout=POLL_S, return_when=FIRST_COMPLETED)
+                            for fut in finished:
+                                task = pending.pop(fut)
+                                failure = fut.exception()  # execute never raises: this is the worker's end
+                                if failure is not None:
+                                    lost.append(task)
+                                    reason = reason or describe_exception(failure)
+                                    continue
+                                result = store_result(fut.result(), plan, state, columns, meta, full_series, written)
+                                failed = [r for r in result.rows if r["status"] != "ok"]
+                                report.failed_rows += len(failed)
+                                report.errors += [f"{r['cell_id']} run {r['run']} {r['method']}: {r['error']}"
+                                                  for r in failed]
+                                report.finished += 1
+                                bar.update(n_methods)
+                    except KeyboardInterrupt:  # a stop signal whose handler was not taken over
+                        stop.signum = stop.signum or signal.SIGINT
+                    if stop.requested:
+                        report.interrupted = True
+                        handle.stop_now()
+                        return
+                remaining = sorted(lost, key=plan.task_cost, reverse=True)
+                if not remaining:
                     return
-            remaining = sorted(lost, key=plan.task_cost, reverse=True)
-            if not remaining:
-                return
-            if start < MAX_POOL_STARTS:
-                note(f"note: a worker process ended abruptly ({reason}); the {len(remaining)} task(s) it left "
-                     f"unfinished were not stored and run again in new worker processes")
-        report.lost, report.lost_reason = len(remaining), reason
-    finally:
-        if bar is not None:
-            bar.close()
+                if start < MAX_POOL_STARTS:
+                    note(f"note: a worker process ended abruptly ({reason}); the {len(remaining)} task(s) it left "
+                         f"unfinished were not stored and run again in new worker processes")
+            report.lost, report.lost_reason = len(remaining), reason
+        finally:
+            if bar is not None:
+                bar.close()
