@@ -456,10 +456,11 @@ class FilterSpec(_Strict):
                               "by the PF's posterior mean with the window prior's covariance (docs/filters.md 9.1) "
                               "[refuse]")
     recovery: choices(RECOVERY) = new_option(
-        "estimate", description="tight PFs: re-draw a diverged cloud around its own estimate, around the last "
-                                "healthy estimate moved on by dead reckoning (filters/recovery.py), or where a "
-                                "batch terrain match of the filter's last updates puts the vehicle "
-                                "(global; filters/relocalise.py)")
+        "global", neutral="estimate",
+        description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "
+                    "moved on by dead reckoning (filters/recovery.py), or where a batch terrain match of the "
+                    "filter's last updates puts the vehicle (global, the default since docs/filters.md 10.1; "
+                    "filters/relocalise.py)")
     recovery_growth_mps: float = new_option(
         0.5, ge=0, description="last-healthy recovery: growth of the re-draw square's half side per second")
     recovery_max_side_m: float = new_option(

@@ -122,7 +122,11 @@ def test_tight_recovers_heading(monte_carlo):
     # the original 16-run version failed from issue 17 to issue 24 (an expected failure then: over the run
     # 2.13 m vs 2.47 m, '2000 better' p = 0.17); with issue 24's defaults it passes again (2 December 2026:
     # final 1.01 vs 0.96 m, '2000 worse' p = 0.088; over the run 0.80 vs 1.28 m, '2000 better' p = 0.017)
-    pytest.param(RUNS, id="original-16runs"),
+    pytest.param(RUNS, id="original-16runs", marks=pytest.mark.xfail(strict=True, reason=(
+        "fails again since filter.recovery: global became the default (4 December 2026): it changes only the two "
+        "500-particle runs that declared a divergence (runs 0 and 3), their mean final error 0.962 -> 0.942 m "
+        "against 1.008 m with 2000, and '2000 worse' goes from p = 0.088 to p = 0.017 on the 16 runs; the 64-run "
+        "version of the same statistic passes"))),
     pytest.param(RUNS_OF["tight-dvl-2000"], id="64runs")])
 def test_more_particles_do_not_hurt(monte_carlo, runs):
     """(c) 2000 particles versus 500 on the same vehicle data. The final error with 2000 is not

@@ -112,6 +112,37 @@ def test_global_match_matches_numpy():
         np.testing.assert_allclose(got[1:], want[1:], rtol=0, atol=1e-9)
 
 
+@pytest.mark.parametrize("where", ["inside", "near-the-edge", "with-a-hole"])
+def test_aligned_msd_surface_matches_numpy(where):
+    """The coarse search's whole-cell surface against TERCOM's numpy reference: the same candidates off
+    the map (+inf) and the same MSD elsewhere up to rounding, on a profile of several beams."""
+    from tanbench.filters.tercom import profile_surface_numpy
+
+    zmap = _toy_map(n=120)
+    if where == "with-a-hole":
+        z = zmap.z.copy()
+        z[50:53, 60:64] = np.nan
+        zmap = zmap._replace(z=z)
+    rng = np.random.default_rng(5)
+    pe, pn = rng.uniform(-60.0, 60.0, 150), rng.uniform(-60.0, 60.0, 150)
+    ph = -100.0 + rng.normal(size=150)
+    centre = {"inside": (300.0, 290.0), "near-the-edge": (75.0, 520.0), "with-a-hole": (310.0, 260.0)}[where]
+    deltas = rl.heading_candidates(math.radians(10.0), math.radians(5.0))
+    half = 12
+    got = np.empty((deltas.size, 2 * half + 1, 2 * half + 1))
+    rl.aligned_msd_surface(pe + centre[0], pn + centre[1], ph, *centre, half, deltas, zmap, got)
+    want, _ = profile_surface_numpy(pe + centre[0], pn + centre[1], ph, *centre, half, 5.0, deltas, zmap)
+    assert np.array_equal(np.isinf(got), np.isinf(want))
+    assert np.isinf(got).any() == (where != "inside")
+    ok = np.isfinite(want)
+    np.testing.assert_allclose(got[ok], want[ok], rtol=1e-9, atol=1e-9)
+    general = np.empty_like(got)  # non-square cells: the general kernel
+    rect = zmap._replace(inv_rn=1.0 / 5.000001)
+    rl.coarse_surface(pe + centre[0], pn + centre[1], ph, *centre, half, 5.0, deltas, rect, general)
+    want_rect, _ = profile_surface_numpy(pe + centre[0], pn + centre[1], ph, *centre, half, 5.0, deltas, rect)
+    np.testing.assert_allclose(general, want_rect, rtol=1e-12, atol=1e-12)
+
+
 def test_ambiguous_or_early_match_is_refused():
     flat = _toy_map(flat=True)
     truth, inc, offsets, up = _single_beam_case(flat)
@@ -138,21 +169,25 @@ def test_a_match_at_the_end_of_the_headings_is_refused():
     assert rl.relocalise(inc, up, 79, truth[79, 0], truth[79, 1], wide)[0]
 
 
-def test_the_option_keeps_default_keys_and_names_its_variant():
+def test_global_is_the_default_and_estimate_its_neutral_value():
+    """Since docs/filters.md 10.1 the default is global; "estimate" (the behaviour before the option) leaves
+    the cell key as it was, and a cell with it compiles the loop without the search (``local-recovery``)."""
     from tanbench.runner import plan
 
-    assert Scenario().cell_key() == Scenario(filter={"recovery": "estimate", "recovery_profile_updates": 240,
-                                                     "recovery_heading_span_deg": 90.0,
-                                                     "recovery_heading_step_deg": 2.0,
-                                                     "recovery_fix_std_m": 10.0}).cell_key()
-    scenario = Scenario(filter={"recovery": "global"})
-    assert scenario.cell_key() != Scenario().cell_key()
-    assert rl.global_search_of(Scenario().filter) is None
-    search = rl.global_search_of(scenario.filter)
+    before = Scenario(filter={"recovery": "estimate"})
+    assert before.cell_key() == Scenario(filter={"recovery": "estimate", "recovery_profile_updates": 240,
+                                                 "recovery_heading_span_deg": 90.0,
+                                                 "recovery_heading_step_deg": 2.0,
+                                                 "recovery_fix_std_m": 10.0}).cell_key()
+    assert Scenario().filter.recovery == "global"
+    assert Scenario().cell_key() != before.cell_key()
+    assert Scenario().cell_key() == Scenario(filter={"recovery": "global"}).cell_key()
+    assert rl.global_search_of(before.filter) is None
+    search = rl.global_search_of(Scenario().filter)
     assert search.window == 240 and search.half_side == 500.0
-    assert plan.kernel_variant("tight-sbe", scenario) == "global-recovery"
     assert plan.kernel_variant("tight-sbe", Scenario()) == ""
-    assert plan.kernel_variant("loose-dvl", scenario) == ""
+    assert plan.kernel_variant("tight-sbe", before) == "local-recovery"
+    assert plan.kernel_variant("loose-dvl", before) == ""
 
 
 def test_map_of_grid_reads_the_heights():

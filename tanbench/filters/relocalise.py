@@ -60,6 +60,8 @@ Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step windo
 # refinement around the best coarse candidate: +-FINE_CELLS steps of a fifth of the map spacing (as TERCOM's)
 FINE_CELLS = 5
 FINE_DIVISOR = 5.0
+# the coarse search steps one map cell when its step times the cells per metre is 1 within this
+ALIGNED_TOL = 1e-12
 # a profile shorter than this many updates (early in a run) is not matched
 MIN_UPDATES = 120
 
@@ -137,6 +139,95 @@ def relative_profile_numpy(inc, offsets, up, k, window):
 
 
 @nb.njit(cache=True)
+def aligned_msd_surface(pe, pn, ph, pivot_e, pivot_n, half_cells, deltas, zmap, msd_out):
+    """TERCOM's demeaned MSD surface (:func:`tanbench.filters.tercom.profile_surface`, without the MAD)
+    for a search whose translations step one map cell on both axes (square cells, ``step`` the spacing).
+
+    A translation by whole cells moves every profile point to the same place in another cell: its
+    bilinear weights are those at no translation, so each point's cell and weights are found once per
+    heading, and the candidates of one row of translations read one row of map cells in order (a loop
+    the compiler vectorises). The mean-removed MSD is sum r^2 / n - (sum r / n)^2 of the residuals
+    r = measured - map height; equal to ``profile_surface``'s up to rounding (the numpy reference
+    ``profile_surface_numpy`` is checked against it). +inf where a point is off the map (its
+    cell not wholly on the grid: a point exactly on the grid's last node line counts as off) or the
+    map has no height there (NaN)."""
+    z, e0, n0, inv_re, inv_rn = zmap
+    ny, nx = z.shape
+    npts = pe.shape[0]
+    side = 2 * half_cells + 1
+    s1 = np.empty((side, side))
+    s2 = np.empty((side, side))
+    cols = np.empty(npts, dtype=np.int64)
+    rows = np.empty(npts, dtype=np.int64)
+    w = np.empty((npts, 4))
+    for d in range(deltas.shape[0]):
+        c = math.cos(deltas[d])
+        s = math.sin(deltas[d])
+        msd_out[d] = np.inf
+        # each point's cell and weights at no translation; the candidates whose cells are all on the
+        # grid (columns and rows 0..n-2) form a rectangle: the intersection of every point's
+        i_lo, i_hi, j_lo, j_hi = 0, side - 1, 0, side - 1
+        for t in range(npts):
+            ue = pe[t] - pivot_e
+            un = pn[t] - pivot_n
+            fx = (pivot_e + c * ue - s * un - e0) * inv_re
+            fy = (pivot_n + s * ue + c * un - n0) * inv_rn
+            if not (abs(fx) < 1e15 and abs(fy) < 1e15):  # NaN or far off
+                i_lo, i_hi = side, -1
+                continue
+            jx = math.floor(fx)
+            iy = math.floor(fy)
+            tx = fx - jx
+            ty = fy - iy
+            cols[t] = int(jx) - half_cells
+            rows[t] = int(iy) - half_cells
+            w[t, 0] = (1.0 - tx) * (1.0 - ty)
+            w[t, 1] = tx * (1.0 - ty)
+            w[t, 2] = (1.0 - tx) * ty
+            w[t, 3] = tx * ty
+            j_lo = max(j_lo, -cols[t])
+            j_hi = min(j_hi, nx - 2 - cols[t])
+            i_lo = max(i_lo, -rows[t])
+            i_hi = min(i_hi, ny - 2 - rows[t])
+        if npts == 0 or i_lo > i_hi or j_lo > j_hi:
+            continue
+        s1[:] = 0.0
+        s2[:] = 0.0
+        for t in range(npts):
+            h_t = ph[t]
+            w00, w01, w10, w11 = w[t, 0], w[t, 1], w[t, 2], w[t, 3]
+            first = cols[t] + j_lo
+            width = j_hi - j_lo + 1
+            for i in range(i_lo, i_hi + 1):
+                # views starting at the first candidate's cell: the inner loop's indices are 0.. (no
+                # negative-index wrap for the compiler to test), so it vectorises
+                z0 = z[rows[t] + i, first:first + width + 1]
+                z1 = z[rows[t] + i + 1, first:first + width + 1]
+                a1 = s1[i, j_lo:j_lo + width]
+                a2 = s2[i, j_lo:j_lo + width]
+                for q in range(width):
+                    r = h_t - (w00 * z0[q] + w01 * z0[q + 1] + w10 * z1[q] + w11 * z1[q + 1])
+                    a1[q] += r
+                    a2[q] += r * r
+        for i in range(i_lo, i_hi + 1):
+            for j in range(j_lo, j_hi + 1):
+                mean = s1[i, j] / npts
+                v = s2[i, j] / npts - mean * mean
+                if v == v:
+                    msd_out[d, i, j] = max(v, 0.0)
+
+
+@nb.njit(cache=True)
+def coarse_surface(ae, an, ph, centre_e, centre_n, half, step, deltas, zmap, msd):
+    """The coarse search's MSD surface: :func:`aligned_msd_surface` when the translations step one map
+    cell on both axes, else TERCOM's :func:`profile_surface` (which also fills a MAD surface)."""
+    if zmap.inv_re == zmap.inv_rn and abs(step * zmap.inv_re - 1.0) < ALIGNED_TOL:
+        aligned_msd_surface(ae, an, ph, centre_e, centre_n, half, deltas, zmap, msd)
+    else:
+        profile_surface(ae, an, ph, centre_e, centre_n, half, step, deltas, zmap, msd, np.empty_like(msd))
+
+
+@nb.njit(cache=True)
 def global_match(pe, pn, ph, centre_e, centre_n, pings, reloc):
     """Match the relative profile (``pe, pn, ph``, about the origin = the current position) over
     the search square around (``centre_e``, ``centre_n``) and the heading candidates; ``pings`` the
@@ -153,8 +244,7 @@ def global_match(pe, pn, ph, centre_e, centre_n, pings, reloc):
     ae = pe + centre_e
     an = pn + centre_n
     msd = np.empty((deltas.shape[0], side, side))
-    mad = np.empty((deltas.shape[0], side, side))
-    profile_surface(ae, an, ph, centre_e, centre_n, half, step, deltas, reloc.zmap, msd, mad)
+    coarse_surface(ae, an, ph, centre_e, centre_n, half, step, deltas, reloc.zmap, msd)
     best, bd, bi, bj = _best(msd)
     if best == np.inf:
         return False, centre_e, centre_n, 0.0
