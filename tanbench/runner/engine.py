@@ -22,7 +22,7 @@ import os
 import signal
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, wait
+import queue
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -319,7 +319,14 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
                     store.write_text(plan.sweep.text, plan.out / "sweep.yaml")
                     # submitted before the bar is drawn: a forked pool starts its workers at the first submit,
                     # and the bar starts a thread (executors.local_context forks only a single-threaded process)
-                    pending = {handle.executor.submit(execute, task): task for task in remaining}
+                    # each future puts itself in ``finished`` when done (from the executor's thread): the
+                    # loop below takes them one at a time, O(1) per wait however many are pending
+                    finished: queue.SimpleQueue = queue.SimpleQueue()
+                    pending = {}
+                    for task in remaining:
+                        future = handle.executor.submit(execute, task)
+                        pending[future] = task
+                        future.add_done_callback(finished.put)
                     if bar is None:
                         bar = tqdm(total=len(todo) * n_methods, unit="run", disable=not progress, file=sys.stderr,
                                    dynamic_ncols=True, smoothing=0.05,
@@ -327,22 +334,23 @@ def _execute(plan: Plan, state: ResumeState, todo: list[Task], scheduler, meta, 
                     lost, reason = [], ""
                     try:
                         while pending and not stop.requested:
-                            # a timeout, so that a stop request is seen within POLL_S (stop_requests)
-                            finished, _ = wait(list(pending), timeout=POLL_S, return_when=FIRST_COMPLETED)
-                            for fut in finished:
-                                task = pending.pop(fut)
-                                failure = fut.exception()  # execute never raises: this is the worker's end
-                                if failure is not None:
-                                    lost.append(task)
-                                    reason = reason or describe_exception(failure)
-                                    continue
-                                result = store_result(fut.result(), plan, state, columns, meta, full_series, written)
-                                failed = [r for r in result.rows if r["status"] != "ok"]
-                                report.failed_rows += len(failed)
-                                report.errors += [f"{r['cell_id']} run {r['run']} {r['method']}: {r['error']}"
-                                                  for r in failed]
-                                report.finished += 1
-                                bar.update(n_methods)
+                            try:  # a timeout, so that a stop request is seen within POLL_S (stop_requests)
+                                fut = finished.get(timeout=POLL_S)
+                            except queue.Empty:
+                                continue
+                            task = pending.pop(fut)
+                            failure = fut.exception()  # execute never raises: this is the worker's end
+                            if failure is not None:
+                                lost.append(task)
+                                reason = reason or describe_exception(failure)
+                                continue
+                            result = store_result(fut.result(), plan, state, columns, meta, full_series, written)
+                            failed = [r for r in result.rows if r["status"] != "ok"]
+                            report.failed_rows += len(failed)
+                            report.errors += [f"{r['cell_id']} run {r['run']} {r['method']}: {r['error']}"
+                                              for r in failed]
+                            report.finished += 1
+                            bar.update(n_methods)
                     except KeyboardInterrupt:  # a stop signal whose handler was not taken over
                         stop.signum = stop.signum or signal.SIGINT
                     if stop.requested:
