@@ -348,59 +348,35 @@ def longest_first_makespan(costs, workers: int) -> float:
     return max(loads) if costs else 0.0
 
 
-# How fast this machine compiles against the machine the COMPILE_* constants were measured on (docs/speed.md,
-# "tenth session: the speed probe compiles"): numba compiling a fixed small function, the least thread CPU of
-# SPEED_PROBE_ROUNDS compiles after one that sets numba up (not counted), over SPEED_COMPILE_REFERENCE_S. The
-# seventh session's pure-Python probe read a faster core on 4 December while the compile took longer (0.557 and
-# 28-34 s on 3 December, 0.48 and 36-39 s on 4 December).
-SPEED_PROBE_ROUNDS = 3
-SPEED_PROBE_SOURCE = """
-def speed_probe(x, y, n):
-    s = 0.0
-    for i in range(n):
-        a = x[i % x.shape[0]]
-        b = y[(i * 7) % y.shape[0]]
-        if a > b:
-            s += math.sqrt(abs(a - b)) * math.sin(a)
-        else:
-            s -= math.log1p(abs(b)) * math.cos(b)
-    out = np.empty(3)
-    out[0] = s
-    out[1] = x.sum()
-    out[2] = np.median(y)
-    return out
-"""
-# the reference: two cold runs of configs/quick.yaml --workers 2 on the 4 December 2026 VM, idle, run with the reference
-# at 0.4 s (07:57-07:59 UTC): announced about 26 s and 26 s, compiled in 36 and 34 s; 0.4 x 26 / 36 = 0.289 and
-# 0.4 x 26 / 34 = 0.306, their median 0.297 s (what the probe takes on a machine where the constants hold)
-SPEED_COMPILE_REFERENCE_S = 0.297
+# How fast this machine's core is against the one the COMPILE_* constants were measured on (docs/speed.md,
+# "seventh session"): the least thread CPU of seven rounds of a fixed pure-Python workload (dicts, tuples, strings,
+# the kind of work numba's typing and lowering do), over SPEED_REFERENCE_S. The reference was set once, from
+# three cold compiles of configs/quick.yaml on the 3 December 2026 VM (an AMD EPYC with AVX-512; 28, 29 and 34 s
+# against the constants' 52.1 s): that VM's probe time, 0.025 s (the median of 6), over 29 / 52.1.
+SPEED_PROBE_ITEMS = 60_000
+SPEED_REFERENCE_S = 0.0449
 
 
-def _speed_probe_compile_s() -> float:
-    """Thread CPU seconds numba takes to compile ``SPEED_PROBE_SOURCE`` through a fresh dispatcher (no cache)."""
-    import numba
-    import numpy
-
-    scope = {"math": math, "np": numpy}
-    exec(SPEED_PROBE_SOURCE, scope)  # a new function object: numba cannot reuse an earlier compile
-    t0 = time.thread_time()
-    numba.njit(cache=False)(scope["speed_probe"]).compile("float64[:](float64[:], float64[:], int64)")
-    return time.thread_time() - t0
-
-
-def speed_probe_seconds() -> float:
-    """The probe's least thread CPU of ``SPEED_PROBE_ROUNDS`` compiles, after one that is not counted."""
-    _speed_probe_compile_s()
-    return min(_speed_probe_compile_s() for _ in range(SPEED_PROBE_ROUNDS))
+def _speed_probe_work(items: int) -> int:
+    total = 0
+    for i in range(items):
+        d = {"a": i, "b": (i, i + 1), "c": [i] * 3}
+        total += len(d["c"]) + d["b"][1] - d["a"] + len(f"v{i}")
+    return total
 
 
 @functools.lru_cache(maxsize=1)
 def machine_speed_factor() -> float:
     """This machine's compile seconds per second of the COMPILE_* constants' machine, measured once per
-    process (about 0.5 s plus numba's set-up, which the compile that follows needs anyway):
-    :func:`speed_probe_seconds` over ``SPEED_COMPILE_REFERENCE_S``, kept within [0.25, 4]. Thread CPU, so it
-    reads how fast a core compiles, not how much of one we get (that is :func:`cpu_load_now`)."""
-    return max(0.25, min(4.0, speed_probe_seconds() / SPEED_COMPILE_REFERENCE_S))
+    process (about 0.2 s): the probe's least thread CPU time of seven rounds over ``SPEED_REFERENCE_S``,
+    kept within [0.25, 4]. Thread CPU, so it reads how fast a core is, not how much of one we get
+    (that is :func:`cpu_load_now`)."""
+    best = math.inf
+    for _ in range(7):
+        t0 = time.thread_time()
+        _speed_probe_work(SPEED_PROBE_ITEMS)
+        best = min(best, time.thread_time() - t0)
+    return max(0.25, min(4.0, best / SPEED_REFERENCE_S))
 
 
 def busy_jiffies() -> tuple[int, int] | None:
