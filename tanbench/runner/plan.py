@@ -125,7 +125,8 @@ def kernel_variant(method: str, scenario) -> str:
         euler_step, shared_resampling = loop_options(readings_of(f, scenario.sampling_time_s), tight_resampling_of(f))
         parts += ["euler"] * euler_step + ["shared-resampling"] * shared_resampling
         searching = global_search_of(f) is not None
-        parts += [("global" if searching else "local") + "-recovery"] * (searching != DEFAULT_GLOBAL_SEARCH)
+        if searching != DEFAULT_GLOBAL_SEARCH:
+            parts.append("global-recovery" if searching else "local-recovery")
     if family == "loose" and loose_loop_kind(f) != DEFAULT_LOOSE_LOOP:
         parts.append(f"loose-{loose_loop_kind(f)}")
     return "+".join(parts)

@@ -6,10 +6,8 @@ bytecode could land while the parent holds a lock of the executor's: in the midd
 ``concurrent.futures.wait`` acquiring its futures' conditions, say, whose locks would then
 stay held, so the pool's manager thread blocks on them and stopping the pool (which joins
 that thread) hangs. The loop therefore installs :class:`StopRequest` for the signals whose
-handler raises, waits with a short timeout, and stops the pool itself when a request is seen.
-(The loop now takes finished futures from a queue their done-callbacks fill instead of calling
-``wait`` over every pending future: 5 ms per call with 5000 pending, measured, where a queue's
-``get`` costs microseconds; polling ``wait`` ten times a second would have cost the parent that.)
+handler raises, waits with a short timeout (``engine._collect``), and stops the pool itself when
+a request is seen. (That hang is our reading of one CI failure, not reproduced.)
 """
 
 from __future__ import annotations
