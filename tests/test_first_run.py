@@ -279,7 +279,7 @@ def test_kernel_variant_is_what_the_tight_loop_compiles(monkeypatch):
     from tanbench.filters import tight
 
     seen = []
-    monkeypatch.setattr(tight, "_tight_loop", lambda *args: seen.append((args[-2] is not None, args[-1] is not None)))
+    monkeypatch.setattr(tight, "_tight_loop", lambda *args: seen.append((args[-3] is not None, args[-2] is not None)))
     nmap = SimpleNamespace(e0=0.0, e_max=1.0, n0=0.0, n_max=1.0)
     cases = [("", {}), ("euler", EULER), ("shared-resampling", SHARED), ("euler+shared-resampling", {**EULER, **SHARED}),
              ("shared-resampling", {"regularisation": "none"}),  # no jitter: the shared kernel's switch

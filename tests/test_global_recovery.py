@@ -171,7 +171,7 @@ def test_a_match_at_the_end_of_the_headings_is_refused():
 
 def test_global_is_the_default_and_estimate_its_neutral_value():
     """Since docs/filters.md 10.1 the default is global; "estimate" (the behaviour before the option) leaves
-    the cell key as it was, and a cell with it compiles the loop without the search (``local-recovery``)."""
+    the cell key as it was, and every cell compiles the same loop (the search compiles on a run's first need)."""
     from tanbench.runner import plan
 
     before = Scenario(filter={"recovery": "estimate"})
@@ -186,7 +186,7 @@ def test_global_is_the_default_and_estimate_its_neutral_value():
     search = rl.global_search_of(Scenario().filter)
     assert search.window == 240 and search.half_side == 500.0
     assert plan.kernel_variant("tight-sbe", Scenario()) == ""
-    assert plan.kernel_variant("tight-sbe", before) == "local-recovery"
+    assert plan.kernel_variant("tight-sbe", before) == ""
     assert plan.kernel_variant("loose-dvl", before) == ""
 
 
@@ -214,3 +214,66 @@ def test_tight_loop_runs_through_the_search(name):
     out = get(name).run(method_context(scenario, name, vehicle, np.random.SeedSequence(5, spawn_key=(0, 2)), get(name)))
     assert np.all(np.isfinite(out.east)) and np.all(np.isfinite(out.north))
     assert out.reinit[30:].sum() > 0
+
+
+def _one_pass_with_the_search(x, rng, track, ranges, beams, grid, settings, out, search=None):
+    """The tight loop as it ran before the search was compiled on first need: one pass, the search's
+    bundle given from the start."""
+    from tanbench.filters import tight
+
+    euler_step, shared = tight.loop_options(settings.readings, settings.rs)
+    reloc = None if search is None else rl.relocaliser(search, track, beams, ranges, grid, settings.model.sig_u)
+    tight._tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc,
+                      track.euler_in if euler_step else None, settings.rs if shared else None, False)
+
+
+@pytest.mark.parametrize("random_numbers", ["fast", "numpy"])
+def test_a_diverging_run_is_the_one_pass_run(monkeypatch, random_numbers):
+    """The loop stops at its first search and the run is done again from its start with the search
+    (tight_filter_loop): every output is the one a single pass with the search's bundle gives, with
+    either random-number stream (their states put back by rng_state / set_rng_state); a run that never
+    searches takes one pass."""
+    from tanbench.filters import tight
+    from tanbench.methods import get, method_context
+    from tanbench.methods import tight as tight_method
+    from tanbench.runner.seeds import vehicle_seed
+    from tanbench.simulation import simulate_vehicle
+
+    def run(scenario, seed):
+        vehicle = simulate_vehicle(scenario, vehicle_seed(11, scenario, 0))
+        ctx = method_context(scenario, "tight-sbe", vehicle, np.random.SeedSequence(seed, spawn_key=(0, 2)),
+                             get("tight-sbe"))
+        return get("tight-sbe").run(ctx)
+
+    passes = []
+    loop = tight._tight_loop
+    monkeypatch.setattr(tight, "_tight_loop", lambda *args: passes.append(args[-1]) or loop(*args))
+    diverging = short_scenario(duration_s=120.0, particles=300,
+                               filter={"recovery_profile_updates": 30, "divergence_sigma": 0.5,
+                                       "divergence_steps": 2, "random_numbers": random_numbers})
+    two = run(diverging, 5)
+    assert passes == [True, False] and two.reinit[30:].sum() > 0
+    with monkeypatch.context() as m:
+        m.setattr(tight_method, "tight_filter_loop", _one_pass_with_the_search)
+        one = run(diverging, 5)
+    for name in ("east", "north", "up", "yaw", "var_e", "var_n", "cov_en", "ess", "reinit"):
+        np.testing.assert_array_equal(getattr(two, name), getattr(one, name), err_msg=name)
+    np.testing.assert_array_equal(two.extra["healthy"], one.extra["healthy"])
+    passes.clear()
+    calm = run(short_scenario(duration_s=60.0, particles=300, filter={"random_numbers": random_numbers}), 5)
+    assert passes == [True] and not calm.reinit[1:].any()
+
+
+@pytest.mark.parametrize("random_numbers", ["fast", "numpy"])
+def test_rng_state_puts_the_stream_back(random_numbers):
+    from tanbench.filters.rng import fill_normals, loop_rng, rng_state, set_rng_state
+
+    rng = loop_rng(np.random.default_rng(np.random.SeedSequence(3)), random_numbers)
+    first, again = np.empty(1001), np.empty(1001)
+    state = rng_state(rng)
+    fill_normals(rng, first)
+    set_rng_state(rng, state)
+    fill_normals(rng, again)
+    np.testing.assert_array_equal(first, again)
+    fill_normals(rng, again)
+    assert not np.array_equal(first, again)

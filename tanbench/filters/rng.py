@@ -507,6 +507,23 @@ def loop_rng(rng: np.random.Generator, random_numbers: str):
     raise ValueError(f"unknown random_numbers {random_numbers!r}")
 
 
+def rng_state(rng):
+    """A copy of the state of what a jitted loop draws from (:func:`loop_rng`: a fast generator's state
+    words, a :class:`Pcg64Stream` or a numpy Generator), for :func:`set_rng_state` to put back."""
+    if isinstance(rng, np.ndarray):
+        return rng.copy()
+    return rng.bit_generator.state
+
+
+def set_rng_state(rng, state) -> None:
+    """Put back a state taken by :func:`rng_state`, in place (a :class:`Pcg64Stream` keeps its Generator's
+    memory: setting the bit generator's state writes into it)."""
+    if isinstance(rng, np.ndarray):
+        rng[...] = state
+    else:
+        rng.bit_generator.state = state
+
+
 # ---- plain-Python references -----------------------------------------------------------------
 def xoshiro_numpy(state, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Reference xoshiro256++ on Python integers: (n output words, the new state)."""

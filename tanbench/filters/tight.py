@@ -52,7 +52,7 @@ from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propaga
 from tanbench.filters.recovery import recovery_square
 from tanbench.filters.relocalise import relocalise, relocaliser
 from tanbench.filters.resample import Resampling, add_log_weights, normalise_with_ess, resample_and_regularise, resampling_of
-from tanbench.filters.rng import fill_normals
+from tanbench.filters.rng import fill_normals, rng_state, set_rng_state
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference
 from tanbench.navigation.increments import D0E, D0N
@@ -242,25 +242,41 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out, search=
     either compiles the loop once more, with both.
 
     ``search`` (``filters/relocalise.py``: :class:`GlobalSearch`, from ``global_search_of``; None unless
-    ``filter.recovery: global``): a diverged filter's cloud is re-drawn where a batch terrain match of
-    its last updates puts the vehicle (:func:`tanbench.filters.relocalise.relocalise`), the built-in
-    re-draw when the match is refused. The same way as above, the loop takes the search's bundle as
-    None without it, so the default compiles no part of it.
+    ``filter.recovery: global``, the default): a diverged filter's cloud is re-drawn where a batch terrain
+    match of its last updates puts the vehicle (:func:`tanbench.filters.relocalise.relocalise`), the
+    built-in re-draw when the match is refused. Most runs never diverge, so the search is compiled only
+    when a run needs it: the loop first runs without the search's bundle (None, as above: no part of the
+    search compiles) and stops at the first update where it would search; only then is the run done again
+    from its start, from the same cloud and random-number state (:func:`tanbench.filters.rng.rng_state`),
+    with the bundle. The two passes draw the same numbers up to that update, so the run's result is the
+    one a single pass with the bundle gives (tests/test_global_recovery.py); a diverging run pays its
+    updates up to the first search twice, and the first such run in a process compiles the search
+    (docs/speed.md, "The global search compiled on first need").
     """
     euler_step, shared_resampling = loop_options(settings.readings, settings.rs)
     euler_in = track.euler_in if euler_step else None
     shared_rs = settings.rs if shared_resampling else None
-    reloc = None if search is None else relocaliser(search, track, beams, ranges, grid, settings.model.sig_u)
-    _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs)
+    if search is None:
+        _tight_loop(x, rng, track, ranges, beams, grid, settings, out, None, euler_in, shared_rs, False)
+        return
+    start, state = x.copy(), rng_state(rng)
+    if _tight_loop(x, rng, track, ranges, beams, grid, settings, out, None, euler_in, shared_rs, True) < 0:
+        return
+    x[...] = start
+    set_rng_state(rng, state)
+    reloc = relocaliser(search, track, beams, ranges, grid, settings.model.sig_u)
+    _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs, False)
 
 
 @nb.njit(cache=True)
-def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs):
+def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs, stop_to_search):
     """:func:`tight_filter_loop`, with ``reloc`` the global search's ``Relocalise`` bundle
     (``filter.recovery: global``) or None, ``euler_in`` the Euler-step inputs (``track.euler_in``) if
     ``readings.propagation`` asks for the Euler step, else None (the exact increments), and
     ``shared_rs`` the Resampling bundle if the shared kernel regularises
-    (``resample.resample_and_regularise``), else None (the posterior-sized kernel)."""
+    (``resample.resample_and_regularise``), else None (the posterior-sized kernel). With
+    ``stop_to_search`` (and ``reloc`` None) it returns at the first update where a diverged cloud would be
+    searched for, before drawing anything there; returns that update, or -1 after the last one."""
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, _ = track
     model, rs, div, prior, readings, lik, guard = settings
     est, var, cov_en_out, ess_out, reinit_out, healthy_out = out
@@ -350,6 +366,8 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
                 centre_e, centre_n, half = recovery_square(div.recovery, mean[E], mean[N], healthy_e, healthy_n, dr_e,
                                                            dr_n, (k - healthy_k) * readings.dt,
                                                            prior.reinit_half_side, div.growth, div.max_half)
+                if stop_to_search:
+                    return k
                 if reloc is not None:
                     found, match_e, match_n, match_turn = relocalise(inc, nav_up, k, mean[E], mean[N], reloc)
                     if found:
@@ -368,6 +386,7 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
             resample_posterior(x, w, logw, ess, rng, rs, YAW, mean[YAW], spread, uni, idx, scratch)
         else:
             resample_and_regularise(x, w, logw, ess, rng, shared_rs, N_TIGHT, spread, uni, idx, scratch)
+    return -1
 
 
 @nb.njit(cache=True)

@@ -18,7 +18,6 @@ from pathlib import Path
 from tanbench import kernel_cache
 from tanbench.config import FilterSpec
 from tanbench.errors import TanbenchError
-from tanbench.filters.relocalise import global_search_of
 from tanbench.filters.tight import loop_options, readings_of, tight_resampling_of
 from tanbench.methods.loose import loop_kind as loose_loop_kind
 from tanbench.methods.registry import builtin_names, get
@@ -63,10 +62,7 @@ COMPILE_LOOP_S = 4.4
 # process's own loose-dvl compiled alone, COMPILE_SHARED_S + COMPILE_ALONE_S = 50.4 s): the first one compiled
 # after the default, fix-only 10.7 s and kalman 12.2 s (one process each), less the loop's COMPILE_LOOP_S; the
 # second after it costs less (3.4 and 6.6 s: they share kernels), which this count overestimates
-# local-recovery (a tight loop without the global search, docs/filters.md 10.2): no kernels of its own, only the
-# loop again (reasoned from what it compiles, not measured)
-COMPILE_OPTION_S = {"euler": 3.5, "shared-resampling": 2.3, "numpy-rng": 3.4, "loose-fix-only": 6.3, "loose-kalman": 7.8,
-                    "local-recovery": 0.0}
+COMPILE_OPTION_S = {"euler": 3.5, "shared-resampling": 2.3, "numpy-rng": 3.4, "loose-fix-only": 6.3, "loose-kalman": 7.8}
 COMPILE_OTHER_OPTION_S = 20.0  # an option not measured yet (a guess)
 # a process loading a family's cached kernels (and the simulation's) before it compiles only another variant
 # of it (a cache warmed by another sweep): thread CPU 1.30 and 1.33 s, load average 5.7-5.8, 3 Dec 2026
@@ -110,12 +106,12 @@ def kernel_variant(method: str, scenario) -> str:
     :func:`tanbench.filters.rng.loop_rng` gives the loop numpy's stream), and for the tight loop
     ``euler`` and ``shared-resampling``, from :func:`tanbench.filters.tight.loop_options`, which
     also decides whether :func:`tanbench.filters.tight.tight_filter_loop` passes ``euler_in`` and
-    ``shared_rs`` as None (the Euler step and the shared kernel then compile), and ``local-recovery``
-    (``filter.recovery`` other than the default's ``global``: the loop takes None instead of the global
-    search's bundle, :mod:`tanbench.filters.relocalise`); for loose-dvl a loop
+    ``shared_rs`` as None (the Euler step and the shared kernel then compile); for loose-dvl a loop
     other than the default's, ``loose-kalman`` or ``loose-fix-only``
     (:func:`tanbench.methods.loose.loop_kind`, which also picks the loop it runs). Other options run
-    in branches compiled either way."""
+    in branches compiled either way. The global search (``filter.recovery: global``) is no variant: every
+    tight cell compiles the loop without it, and a run compiles the search on its first need
+    (:func:`tanbench.filters.tight.tight_filter_loop`)."""
     family = family_of(method)
     f = scenario.filter
     parts = []
@@ -124,16 +120,12 @@ def kernel_variant(method: str, scenario) -> str:
     if family == "tight":
         euler_step, shared_resampling = loop_options(readings_of(f, scenario.sampling_time_s), tight_resampling_of(f))
         parts += ["euler"] * euler_step + ["shared-resampling"] * shared_resampling
-        searching = global_search_of(f) is not None
-        if searching != DEFAULT_GLOBAL_SEARCH:
-            parts.append("global-recovery" if searching else "local-recovery")
     if family == "loose" and loose_loop_kind(f) != DEFAULT_LOOSE_LOOP:
         parts.append(f"loose-{loose_loop_kind(f)}")
     return "+".join(parts)
 
 
 DEFAULT_LOOSE_LOOP = loose_loop_kind(FilterSpec())
-DEFAULT_GLOBAL_SEARCH = global_search_of(FilterSpec()) is not None
 
 
 def cell_kernels(scenario, methods) -> list[str]:
