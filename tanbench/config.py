@@ -455,6 +455,10 @@ class FilterSpec(_Strict):
         "refuse", description="loose TAN: a terrain-only fix that fails loose_fix_prior_gate is refused, or replaced "
                               "by the PF's posterior mean with the window prior's covariance (docs/filters.md 9.1) "
                               "[refuse]")
+    loose_fix_fit_test: bool = new_option(
+        True, description="loose TAN with heading offsets: a fix needs divergence_steps updates in a row whose best "
+                          "particle fits within divergence_sigma / 2 as well as a cloud std below loose_converged_std_m "
+                          "(false: the cloud std alone; docs/filters.md 11)")
     recovery: choices(RECOVERY) = new_option(
         "global", neutral="estimate",
         description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "
@@ -493,6 +497,8 @@ class FilterSpec(_Strict):
                                                or self.loose_fix_prior_gate is not None):
             raise ValueError("filter.loose_bias_gate_sigma, loose_fix_shape and loose_fix_prior_gate need "
                              "filter.loose_heading_offsets: true (set them to null without it)")
+        if not self.loose_heading_offsets and not self.loose_fix_fit_test:
+            raise ValueError("filter.loose_fix_fit_test: false needs filter.loose_heading_offsets: true")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:
             raise ValueError("filter.loose_fix_prior_fallback: posterior needs filter.loose_fix_prior_gate "
                              "(the fixes it replaces are the ones that gate refuses)")

@@ -33,6 +33,11 @@ an artefact of dividing two nearly equal covariances. A refused fix is recorded 
 but does not count towards reopening the KF. With ``prior_fallback``
 (``filter.loose_fix_prior_fallback: posterior``, docs/filters.md 9.1) such a fix is replaced by
 the PF's posterior mean with the window prior's covariance and goes on to the KF's own gates.
+A fix is attempted after ``divergence_steps`` updates in a row with a cloud std below
+``loose_converged_std_m`` and, with ``fit_test`` (``filter.loose_fix_fit_test``), a best particle
+whose mean d^2 / v over the beams is below (divergence_sigma / 2)^2; one wild range on one beam
+(``faults.outlier_fraction``) or an update without bottom lock fails that fit and restarts the count
+(docs/filters.md 11).
 Everything else (fix interval, chi-square gate, floor, reopening a locked-out KF,
 divergence, keep-on-map) is the built-in loop's.
 """
@@ -67,8 +72,10 @@ LOOSE_TURNED_COLS = np.array([E, N, YAW], dtype=np.int64)  # the rows the regula
 TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
 # the fix gates: the z-gyro bias limit (rad/s; inf: off), the cloud's weight inside its 95 % ellipse (0: off), the
 # sampling time (s), the chi-square above which a terrain-only fix disagrees with its own window prior (inf: off), and
-# whether such a fix is replaced by the PF's posterior mean with the window prior's covariance (else refused)
-Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback", defaults=(np.inf, False))
+# whether such a fix is replaced by the PF's posterior mean with the window prior's covariance (else refused), and
+# whether the updates before a fix must fit (the best particle's mean d^2 / v below (divergence_sigma / 2)^2) besides
+# having a cloud std below loose_converged_std_m (filter.loose_fix_fit_test)
+Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test", defaults=(np.inf, False, True))
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
 
 
@@ -177,7 +184,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
     out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
-    bias_limit, shape_min, dt, prior_gate, prior_fallback = gates
+    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]
@@ -255,7 +262,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
         weighted_estimate(x[:2], w, -1, 0.0, mean, v, cov)
         spread = math.sqrt(v[0] + v[1])
         healthy = spread < converged_std and best < consistent_chi
-        good = good + 1 if healthy else 0
+        ready = healthy if fit_test else spread < converged_std
+        good = good + 1 if ready else 0
         locked = locked or healthy
         since_fix += 1
         fixed_out[k] = 0
