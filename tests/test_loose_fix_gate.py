@@ -61,3 +61,37 @@ def test_the_fallback_needs_the_gate_and_keeps_the_diagnosed_run():
                                                "loose_fix_prior_fallback": "posterior"}})
     m = run_method(fallback, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
     assert not m.metrics["diverged"] and m.metrics["final_horizontal_error_m"] < 10.0
+
+
+def _with_filter(scenario: Scenario, **options) -> Scenario:
+    data = scenario.model_dump(mode="json")
+    return Scenario(**{**data, "filter": {**data["filter"], **options}})
+
+
+def test_the_fit_test_is_an_option_neutral_when_on_and_needs_heading_offsets():
+    assert Scenario(filter={"loose_fix_fit_test": True}).cell_key() == Scenario(
+        filter={"loose_fix_fit_test": True, "recovery": "global"}).cell_key()
+    assert "loose_fix_fit_test" not in str(Scenario(filter={"loose_fix_fit_test": True}).identity())
+    assert Scenario(filter={"loose_fix_fit_test": False}).cell_key() != Scenario(
+        filter={"loose_fix_fit_test": True}).cell_key()
+    with pytest.raises(ValidationError, match="loose_fix_fit_test"):
+        Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+                         "loose_fix_fit_test": False})
+
+
+def test_outliers_starve_the_fixes_through_the_fit_test():
+    """docs/filters.md 11: realism's 5 % outlier cell, run 9, as diagnosed (the fit test on): one wild range
+    fails the fit, so few fixes are attempted, the KF never learns the heading and the run is lost; without
+    the fit test, on the same vehicle data and filter seed, more fixes come and the run is kept."""
+    sweep = load_sweep("configs/realism.yaml")
+    cell = next(c.scenario for c in sweep.cells if c.scenario.faults.outlier_fraction == 0.05
+                and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
+    sc = _with_filter(cell, loose_fix_fit_test=True)
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
+    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
+    runs = {name: run_method(s, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
+            .metrics for name, s in (("fit test", sc), ("no fit test", _with_filter(sc, loose_fix_fit_test=False)))}
+    assert runs["fit test"]["diverged"] and runs["fit test"]["final_horizontal_error_m"] > 100.0
+    assert runs["fit test"]["fixes_accepted"] <= 5
+    assert not runs["no fit test"]["diverged"] and runs["no fit test"]["final_horizontal_error_m"] < 10.0
+    assert runs["no fit test"]["fixes_accepted"] > 2 * runs["fit test"]["fixes_accepted"]
