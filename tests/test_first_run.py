@@ -392,3 +392,30 @@ def test_a_warm_cache_with_a_new_variant_warms_only_that_variant(tmp_path, monke
     assert calls == []
 
 
+
+
+ONE_SIGNATURE_KERNELS = {  # kernels the simulation and every method's inputs call, from Python wrappers
+    "tanbench.terrain.grid": "bilinear_many", "tanbench.sensors.raycast": "cast_rays",
+    "tanbench.navigation.increments": "interval_increments",
+    "tanbench.terrain.representation": "representation_variance",
+}
+
+
+def test_the_warm_up_compiles_one_signature_per_wrapped_kernel():
+    """numba compiles a kernel once per argument type, and read-only is part of an array's type: the
+    wrappers hand these kernels read-only inputs (tanbench.arrays.read_only) whether the caller's arrays
+    were a method's read-only views or fresh ones, so warming up the CI sweep's three methods (which also
+    simulates the run and builds the maps) asks each for one signature, in a process of its own."""
+    import json
+    import subprocess
+    import sys
+
+    code = ("import importlib, json\n"
+            "from tanbench.runner.executors import warm_up\n"
+            "warm_up(None, ('tight-dvl', 'tight-sbe', 'loose-dvl'))\n"
+            f"kernels = {ONE_SIGNATURE_KERNELS!r}\n"
+            "print(json.dumps({m + '.' + k: len(getattr(importlib.import_module(m), k).signatures)"
+            " for m, k in kernels.items()}))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    counts = json.loads(out.stdout.strip().splitlines()[-1])
+    assert counts == {f"{m}.{k}": 1 for m, k in ONE_SIGNATURE_KERNELS.items()}

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from tanbench.arrays import read_only
 from tanbench.config import Scenario
 from tanbench.errors import TanbenchError, describe_exception
 from tanbench.simulation import NavSolution, Observations, motion_plan
@@ -190,12 +191,6 @@ def method_view(scenario: Scenario) -> Scenario:
     """The scenario as a method sees it: the world-only sections withheld (None); its own copy."""
     return scenario.model_copy(update={"terrain": None, "trajectory": None, "navigation": None, "faults": None},
                                deep=True)
-
-
-def read_only(arr: np.ndarray) -> np.ndarray:
-    """A read-only view of ``arr``: the same memory (no copy, the same alignment), over a
-    read-only buffer, so that neither it nor a view of it can be made writeable again."""
-    return np.asarray(memoryview(arr).toreadonly())
 
 
 def _read_only_fields(obj):

@@ -24,6 +24,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from tanbench.arrays import read_only
 from tanbench.earth import EARTH_RATE
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -90,8 +91,7 @@ def compute_increments(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:
     """The (K, 12) increments table for the intervals between ``update_idx`` samples."""
     update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
     out = np.empty((max(update_idx.size - 1, 0), N_INCREMENTS))
-    interval_increments(dt, np.ascontiguousarray(pos), np.ascontiguousarray(pitch),
-                        np.ascontiguousarray(roll), np.ascontiguousarray(yaw), update_idx, out)
+    interval_increments(dt, *(read_only(np.ascontiguousarray(a)) for a in (pos, pitch, roll, yaw, update_idx)), out)
     return out
 
 

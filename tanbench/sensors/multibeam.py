@@ -36,6 +36,7 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.arrays import read_only
 from tanbench.sensors.faults import add_outliers
 from tanbench.sensors.raycast import cast_rays
 from tanbench.vehicle.attitude import dcm_body_to_nav, dcm_body_to_nav_numpy
@@ -108,8 +109,8 @@ def swath_ranges(truth_map, pos, pitch, roll, yaw, angles_rad, max_range) -> np.
                                    .reshape(-1, 3))
     out = np.empty(n * m)
     step = 0.5 * min(truth_map.res_e, truth_map.res_n)
-    cast_rays(*truth_map.kernel_args(), origins, np.ascontiguousarray(dirs.reshape(-1, 3)), float(max_range), step,
-              out)
+    cast_rays(*truth_map.kernel_args(), read_only(origins), read_only(np.ascontiguousarray(dirs.reshape(-1, 3))),
+              float(max_range), step, out)
     return out.reshape(n, m)
 
 

@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from tanbench.arrays import read_only
 from tanbench.sensors.raycast import cast_rays
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -56,8 +57,8 @@ def true_ranges(truth_map, pos, pitch, roll, yaw, beams, beamwidth_deg=0.0, max_
     origins = np.broadcast_to(pos[:, None, None, :], dirs.shape).reshape(-1, 3)
     out = np.empty(n * m * r)
     step = 0.5 * min(truth_map.res_e, truth_map.res_n)
-    cast_rays(*truth_map.kernel_args(), np.ascontiguousarray(origins),
-              np.ascontiguousarray(dirs.reshape(-1, 3)), float(max_range), step, out)
+    cast_rays(*truth_map.kernel_args(), read_only(np.ascontiguousarray(origins)),
+              read_only(np.ascontiguousarray(dirs.reshape(-1, 3))), float(max_range), step, out)
     # first echo in the cone: the shortest ray that hits (a ray that misses does not blank the beam)
     return np.fmin.reduce(out.reshape(n, m, r), axis=2) if r > 1 else out.reshape(n, m)
 

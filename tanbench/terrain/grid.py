@@ -19,6 +19,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from tanbench.arrays import read_only
 from tanbench.fastmath import FASTMATH
 
 # the map as the jitted kernels take it (a named tuple: numba passes it by value)
@@ -88,8 +89,8 @@ class Map:
         n = np.asarray(n, dtype=np.float64)
         shape = np.broadcast_shapes(e.shape, n.shape)
         out = np.empty(shape)
-        bilinear_many(*self.kernel_args(), np.broadcast_to(e, shape).ravel(),
-                      np.broadcast_to(n, shape).ravel(), out.reshape(-1))
+        bilinear_many(*self.kernel_args(), read_only(np.ascontiguousarray(np.broadcast_to(e, shape).ravel())),
+                      read_only(np.ascontiguousarray(np.broadcast_to(n, shape).ravel())), out.reshape(-1))
         return out
 
     def node_coords(self) -> tuple[np.ndarray, np.ndarray]:

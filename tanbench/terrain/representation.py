@@ -36,6 +36,8 @@ import math
 import numba as nb
 import numpy as np
 
+from tanbench.arrays import read_only
+
 
 @nb.njit(cache=True)
 def _diff(a_minus, a0, a_plus, step):
@@ -138,7 +140,7 @@ def map_variance_grid(nmap, slope_factor: float, map_error: float, representatio
     """The representation-variance grid of a navigation :class:`~tanbench.terrain.grid.Map`:
     the slope term (``representation: slope``) or bilinear interpolation's (``bilinear``)."""
     out = np.empty_like(nmap.z)
-    z = np.ascontiguousarray(nmap.z)
+    z = read_only(np.ascontiguousarray(nmap.z))
     if representation == "bilinear":
         interpolation_variance(z, float(map_error), out)
     elif representation == "slope":
