@@ -210,7 +210,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     p_prior = np.empty((2, 2))
     zt = np.empty(2)
     nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
-    dist_block = np.zeros((2, block))
+    dist_buf = np.zeros(2 * block)  # unused (no distance innovation), shaped as the tight loop's
+    no_distance = steps < 0  # False, but a run-time bool as in the tight loop's call: one compile of the pass
     noise_buf = np.empty(3 * block)
     work = new_likelihood_work(block, 4 * grid.grids)
     consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
@@ -255,7 +256,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
         best = np.inf
         for lo in range(0, m, block):
             n = min(block, m - lo)
-            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist_block[:, :n], False,
+            dist = dist_buf[:2 * n].reshape((2, n))
+            best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist, no_distance,
                                                work_block(work, n), ll[lo:lo + n]))
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
