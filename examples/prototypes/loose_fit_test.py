@@ -1,4 +1,8 @@
-"""``filter.loose_fix_fit_test: false`` against the defaults (docs/filters.md section 11): the paired test.
+"""A loose-dvl fit-test candidate against the defaults (docs/filters.md sections 11 and 11.2): the paired test.
+
+The candidates: ``no-fit-test`` (``filter.loose_fix_fit_test: false``, section 11, root seed 4122026 for its
+test cells) and ``one-wild-beam`` (``filter.loose_fix_fit_one_wild_beam: true``, section 11.2, root seed 5122026).
+
 
 Every run's vehicle data and filter seed are those of the defaults' keys; loose-dvl runs once at the
 defaults and once with the candidate on the same data and seed, so a pair differs only where the fit
@@ -7,7 +11,7 @@ root seed) and the guards are fixed in section 11. Writes one CSV row per (group
 prints the section's rules.
 
     .venv/bin/python examples/prototypes/heldout_relief.py .cache/unseen-relief --unseen
-    .venv/bin/python examples/prototypes/loose_fit_test.py OUT.csv [--workers 2]
+    .venv/bin/python examples/prototypes/loose_fit_test.py OUT.csv [--workers 2] [--candidate one-wild-beam]
     .venv/bin/python examples/prototypes/loose_fit_test.py --summary OUT.csv
 """
 
@@ -27,7 +31,10 @@ from tanbench.sweep import load_sweep
 from tanbench.simulation import simulate_vehicle
 
 METHOD = "loose-dvl"
-TEST_SEED = 4122026
+# candidate -> (its filter settings, the held-out root seed of its test cells)
+CANDIDATES = {"no-fit-test": ({"loose_fix_fit_test": False}, 4122026),
+              "one-wild-beam": ({"loose_fix_fit_one_wild_beam": True}, 5122026)}
+CANDIDATE = "no-fit-test"
 TEST_RUNS = 30
 # the realism sweep's fault cells at the recommended settings: (table, the fault's field, its value)
 FAULTS = (("depth_bias", "faults.tide_bias_m", 2.0), ("tide", "faults.tide_amplitude_m", 1.5),
@@ -40,9 +47,9 @@ FIELDS = ["group", "cell", "run", "arm", "diverged", "final_horizontal_error_m",
           "fixes_accepted", "fixes_rejected", "reinitialisations", "filter_wall_s"]
 
 
-def with_candidate(scenario: Scenario) -> Scenario:
+def with_candidate(scenario: Scenario, candidate: str) -> Scenario:
     data = scenario.model_dump(mode="json")
-    data["filter"]["loose_fix_fit_test"] = False
+    data["filter"].update(CANDIDATES[candidate][0])
     return Scenario(**data)
 
 
@@ -61,8 +68,9 @@ def test_cells() -> list:
     return out
 
 
-def jobs() -> list:
-    out = [("test", table, scenario, TEST_SEED, r) for table, scenario in test_cells() for r in range(TEST_RUNS)]
+def jobs(candidate: str) -> list:
+    seed = CANDIDATES[candidate][1]
+    out = [("test", table, scenario, seed, r) for table, scenario in test_cells() for r in range(TEST_RUNS)]
     sweeps = [(w, str(UNSEEN_DIR / f"{w}.yaml"), 10) for w in UNSEEN_WORLDS]
     sweeps += [(group, path, runs) for group, (path, runs) in GUARDS.items()]
     for group, path, runs in sweeps:
@@ -77,22 +85,22 @@ def jobs() -> list:
             label = "unseen" if group.startswith("J") else group
             name = group if label == "unseen" else f"{group}:{cell.cell_id[:8]}"
             out += [(label, name, cell.scenario, sweep.spec.seed, r) for r in range(runs)]
-    return out
+    return [job + (candidate,) for job in out]
 
 
 def _pair(job):
-    group, name, scenario, root, run = job
+    group, name, scenario, root, run, candidate = job
     vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
     fseed = keyed_filter_seed(root, scenario.cell_key(), get(METHOD).seed_id, run)
     rows = []
-    for arm, sc in (("defaults", scenario), ("candidate", with_candidate(scenario))):
+    for arm, sc in (("defaults", scenario), ("candidate", with_candidate(scenario, candidate))):
         m = run_method(sc, METHOD, vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
         rows.append({"group": group, "cell": name, "run": run, "arm": arm, **{k: m[k] for k in FIELDS[4:]}})
     return rows
 
 
-def run(out_csv: str, workers: int) -> None:
-    write_rows(out_csv, FIELDS, _pair, jobs(), workers, chunksize=2)
+def run(out_csv: str, workers: int, candidate: str = CANDIDATE) -> None:
+    write_rows(out_csv, FIELDS, _pair, jobs(candidate), workers, chunksize=2)
     summary(out_csv)
 
 
@@ -115,7 +123,7 @@ def summary(path: str) -> None:
                           values=["diverged", "final_horizontal_error_m", "fixes_accepted", "filter_wall_s"],
                           aggfunc="first")
     group = wide.index.get_level_values("group")
-    sets = {"test cells (realism faults, root seed 4122026)": group == "test",
+    sets = {"test cells (realism faults, the candidate's held-out root seed)": group == "test",
             "fault-free guards (zhou2017, ci, monterey)": group.isin(["zhou2017", "ci", "monterey"]),
             "unseen worlds J25-J40": group == "unseen", "realism guard (its own seed)": group == "realism",
             "monterey": group == "monterey"}
@@ -150,7 +158,8 @@ if __name__ == "__main__":
     args = sys.argv[1:]
     if args[:1] == ["--summary"]:
         summary(args[1])
-    elif len(args) in (1, 3):
-        run(args[0], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
+    elif len(args) in (1, 3, 5):
+        run(args[0], int(args[args.index("--workers") + 1]) if "--workers" in args else 2,
+            args[args.index("--candidate") + 1] if "--candidate" in args else CANDIDATE)
     else:
         raise SystemExit(__doc__)

@@ -74,8 +74,12 @@ TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
 # sampling time (s), the chi-square above which a terrain-only fix disagrees with its own window prior (inf: off), and
 # whether such a fix is replaced by the PF's posterior mean with the window prior's covariance (else refused), and
 # whether the updates before a fix must fit (the best particle's mean d^2 / v below (divergence_sigma / 2)^2) besides
-# having a cloud std below loose_converged_std_m (filter.loose_fix_fit_test)
-Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test", defaults=(np.inf, False, True))
+# having a cloud std below loose_converged_std_m (filter.loose_fix_fit_test), and whether, with the fit test, an update
+# that fails it by one beam only, or has no bottom lock, leaves the count as it is (filter.loose_fix_fit_one_wild_beam)
+Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test fit_neutral",
+                   defaults=(np.inf, False, True, False))
+# a one-particle cloud, its beam, work arrays, distance rows and log-likelihood (fit_without_worst_beam)
+OneParticle = namedtuple("OneParticle", "x vec work dist ll")
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
 
 
@@ -148,6 +152,42 @@ def _draw_headings(x, rng, yaw_c, std):
 
 
 @nb.njit(cache=True)
+def fit_without_worst_beam(x, ll, vec, grid, lik, consts, att, no_distance, one):
+    """The mean d^2 / v over the beams ``vec`` (``beam_vectors``) of the particle of ``x`` with the largest
+    log-likelihood ``ll``, its worst beam left out when 3 or more beams have a range (else over all of them);
+    inf without a beam. Each beam goes through the likelihood pass alone on a one-particle cloud (``one``,
+    :data:`OneParticle`), so its d^2 / v is the pass's own."""
+    best_j = 0
+    for j in range(ll.shape[0]):
+        if ll[j] > ll[best_j]:
+            best_j = j
+    for c in range(x.shape[0]):
+        one.x[c, 0] = x[c, best_j]
+    total = 0.0
+    worst = 0.0
+    beams = vec.shape[0]
+    for b in range(beams):
+        for c in range(3):
+            one.vec[0, c] = vec[b, c]
+        fit = loglik_tight_pass(one.x, 0, one.vec, grid, lik, consts, att, one.dist, no_distance,
+                                work_block(one.work, 1), one.ll)
+        total += fit
+        worst = max(worst, fit)
+    if beams >= 3:
+        return (total - worst) / (beams - 1)
+    return total / beams if beams > 0 else np.inf
+
+
+def fit_without_worst_beam_numpy(per_beam_fits):
+    """Plain-numpy reference of :func:`fit_without_worst_beam`'s last step, from the chosen particle's
+    per-beam d^2 / v."""
+    f = np.asarray(per_beam_fits, dtype=float)
+    if f.size >= 3:
+        return float((f.sum() - f.max()) / (f.size - 1))
+    return float(f.mean()) if f.size else np.inf
+
+
+@nb.njit(cache=True)
 def _level(x, up, pitch, roll):
     """Rows U, PITCH, ROLL of ``x`` <- the navigation's (the loose cloud does not estimate them)."""
     for j in range(x.shape[1]):
@@ -184,7 +224,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
     out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
-    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test = gates
+    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]
@@ -212,6 +252,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
     dist_buf = np.zeros(2 * block)  # unused (no distance innovation), shaped as the tight loop's
     no_distance = steps < 0  # False, but a run-time bool as in the tight loop's call: one compile of the pass
+    one = OneParticle(np.zeros((N_TIGHT, 1)), np.empty((1, 3)), new_likelihood_work(1, 4 * grid.grids), np.zeros((2, 1)),
+                      np.empty(1))
     noise_buf = np.empty(3 * block)
     work = new_likelihood_work(block, 4 * grid.grids)
     consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
@@ -265,7 +307,12 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
         spread = math.sqrt(v[0] + v[1])
         healthy = spread < converged_std and best < consistent_chi
         ready = healthy if fit_test else spread < converged_std
-        good = good + 1 if ready else 0
+        if (fit_neutral and fit_test and spread < converged_std and not ready
+                and (best == np.inf or fit_without_worst_beam(x, ll, vec, grid, lik, consts, att, no_distance, one)
+                     < consistent_chi)):
+            pass  # no bottom lock, or one wild beam: the count stays
+        else:
+            good = good + 1 if ready else 0
         locked = locked or healthy
         since_fix += 1
         fixed_out[k] = 0
