@@ -980,3 +980,39 @@ def test_sorted_uniforms_are_uniform_order_statistics():
         means += out / reps
     np.testing.assert_allclose(means, np.arange(1, m + 1) / (m + 1), atol=5 * 0.5 / math.sqrt(reps * m))
     assert stats.kstest(np.concatenate(pooled), "uniform").pvalue > 1e-3
+
+
+@pytest.mark.parametrize("nan_beams", ["all", "one-nan", "two-nan", "all-nan"])
+def test_fit_without_worst_beam_matches_numpy(world, nan_beams):
+    """loose_turned.fit_without_worst_beam (docs/filters.md 11.2): the most likely particle's d^2 / v per
+    beam, its worst beam left out when 3 or more have a range; against the numpy likelihood reference, beam by
+    beam, and the reference's last step."""
+    from tanbench.filters import loose_turned as lt
+
+    _, v, nmap = world
+    rng = np.random.default_rng([KERNEL_SEED, 29, len(RANGE_CASES[nan_beams])])
+    cloud, _ = likelihood_particles(rng, nmap, m=64)
+    grid, za = node_grid(nmap), nmap.kernel_args()
+    beams = v.obs.dvl_beams
+    consts = lik.beam_constants(1.0, 1.0, 5.0)
+    one = lt.OneParticle(np.zeros((N_TIGHT, 1)), np.empty((1, 3)), lik.new_likelihood_work(1, 4 * grid.grids),
+                         np.zeros((2, 1)), np.empty(1))
+    for ping in rng.integers(0, v.obs.dvl_ranges.shape[0], 3):
+        ranges = v.obs.dvl_ranges[ping].copy()
+        ranges[RANGE_CASES[nan_beams]] = np.nan
+        if nan_beams == "one-nan":
+            ranges[2] = ranges[2] + 40.0  # a wild range on one of the three beams left
+        ll, _ = lik.loglik_tight_numpy(cloud, beams, ranges, za, None, PLAIN, 1.0, 5.0, None, 0.1)
+        att = attitude_reference(*nav_attitude(v, ping))
+        got = lt.fit_without_worst_beam(cloud, ll, lik.beam_vectors(beams, ranges), grid, PLAIN, consts, att, False,
+                                        one)
+        j = int(np.argmax(ll))
+        per_beam = [lik.loglik_tight_numpy(cloud[:, [j]], beams[[b]], ranges[[b]], za, None, PLAIN, 1.0, 5.0, None,
+                                           0.1)[1] for b in range(beams.shape[0]) if not np.isnan(ranges[b])]
+        want = lt.fit_without_worst_beam_numpy(per_beam)
+        if np.isinf(want):
+            assert np.isinf(got)
+        else:
+            assert got == pytest.approx(want, rel=1e-9, abs=1e-12)
+        if nan_beams == "one-nan":  # the wild beam is the one left out
+            assert want < max(per_beam)

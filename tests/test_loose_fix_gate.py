@@ -95,3 +95,25 @@ def test_outliers_starve_the_fixes_through_the_fit_test():
     assert runs["fit test"]["fixes_accepted"] <= 5
     assert not runs["no fit test"]["diverged"] and runs["no fit test"]["final_horizontal_error_m"] < 10.0
     assert runs["no fit test"]["fixes_accepted"] > 2 * runs["fit test"]["fixes_accepted"]
+
+
+def test_one_wild_beam_is_an_option_neutral_when_off_and_needs_the_fit_test():
+    assert Scenario(filter={"loose_fix_fit_one_wild_beam": False}).cell_key() == Scenario(
+        filter={"loose_fix_fit_test": True}).cell_key()
+    assert Scenario(filter={"loose_fix_fit_one_wild_beam": True}).cell_key() != Scenario().cell_key()
+    with pytest.raises(ValidationError, match="loose_fix_fit_one_wild_beam"):
+        Scenario(filter={"loose_fix_fit_one_wild_beam": True, "loose_fix_fit_test": False})
+
+
+def test_one_wild_beam_keeps_the_diagnosed_outlier_run():
+    """docs/filters.md 11.2: the run of section 11's diagnosis, on the same vehicle data and filter seed, with
+    an update failing the fit by one beam leaving the count: more fixes, and the run is kept."""
+    sweep = load_sweep("configs/realism.yaml")
+    cell = next(c.scenario for c in sweep.cells if c.scenario.faults.outlier_fraction == 0.05
+                and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
+    sc = _with_filter(cell, loose_fix_fit_test=True)
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
+    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
+    m = run_method(_with_filter(sc, loose_fix_fit_one_wild_beam=True), "loose-dvl", vehicle,
+                   np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+    assert not m["diverged"] and m["final_horizontal_error_m"] < 10.0 and m["fixes_accepted"] > 8
