@@ -460,9 +460,10 @@ class FilterSpec(_Strict):
                           "particle fits within divergence_sigma / 2 as well as a cloud std below loose_converged_std_m "
                           "(false: the cloud std alone; docs/filters.md 11)")
     loose_fix_fit_one_wild_beam: bool = new_option(
-        False, description="loose TAN with the fit test: an update that fails it by one beam only (the most likely "
-                           "particle fits without its worst beam, 3 beams or more) or has no bottom lock neither "
-                           "counts toward a fix nor restarts the count (docs/filters.md 11.2)")
+        True, neutral=False,
+        description="loose TAN with the fit test: an update that fails it by one beam only (the most likely particle "
+                    "fits without its worst beam, 3 beams or more) or has no bottom lock neither counts toward a fix "
+                    "nor restarts the count (the default since docs/filters.md 11.3) [false]")
     recovery: choices(RECOVERY) = new_option(
         "global", neutral="estimate",
         description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "
@@ -503,9 +504,9 @@ class FilterSpec(_Strict):
                              "filter.loose_heading_offsets: true (set them to null without it)")
         if not self.loose_heading_offsets and not self.loose_fix_fit_test:
             raise ValueError("filter.loose_fix_fit_test: false needs filter.loose_heading_offsets: true")
-        if self.loose_fix_fit_one_wild_beam and not (self.loose_heading_offsets and self.loose_fix_fit_test):
-            raise ValueError("filter.loose_fix_fit_one_wild_beam: true needs filter.loose_heading_offsets and "
-                             "loose_fix_fit_test true")
+        if self.loose_fix_fit_one_wild_beam and not self.loose_heading_offsets:
+            raise ValueError("filter.loose_fix_fit_one_wild_beam: true needs filter.loose_heading_offsets: true "
+                             "(set it to false without it)")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:
             raise ValueError("filter.loose_fix_prior_fallback: posterior needs filter.loose_fix_prior_gate "
                              "(the fixes it replaces are the ones that gate refuses)")

@@ -47,6 +47,7 @@ PROFILES: dict[str, dict[str, tuple[object, str]]] = {
         "filter.loose_bias_gate_sigma": (None, "the paper gates no fix"),
         "filter.loose_fix_shape": (None, "the paper gates no fix"),
         "filter.loose_fix_prior_gate": (None, "the paper gates no fix"),
+        "filter.loose_fix_fit_one_wild_beam": (False, "the paper gates no fix"),
         "filter.loose_fix_floor_m": (5.0, "tanbench's earlier fix floor (fix-only architecture: unused)"),
         "filter.tight_regularisation": ("shared", "Algorithm 1 and Section 3.3 describe no jitter (regularisation "
                                                   "none above)"),

@@ -20,7 +20,7 @@ def test_the_gate_is_an_option_off_by_default_and_needs_heading_offsets():
     assert "loose_fix_prior_gate" not in str(Scenario().identity())  # off is neutral: the keys from before it
     with pytest.raises(ValidationError, match="loose_fix_prior_gate"):
         Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
-                         "loose_fix_prior_gate": 13.8})
+                         "loose_fix_fit_one_wild_beam": False, "loose_fix_prior_gate": 13.8})
 
 
 def test_the_diagnosed_run_is_lost_by_its_fixes_and_kept_by_the_gate():
@@ -33,7 +33,7 @@ def test_the_diagnosed_run_is_lost_by_its_fixes_and_kept_by_the_gate():
     quick = sweep.cells[0].scenario
     sc = Scenario(**{**quick.model_dump(mode="json"),
                      "filter": {**quick.model_dump(mode="json")["filter"], "loose_fix_prior_gate": None,
-                                "recovery": "estimate"}})
+                                "recovery": "estimate", "loose_fix_fit_one_wild_beam": False}})
     assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 10, 2000)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
@@ -53,7 +53,7 @@ def test_the_fallback_needs_the_gate_and_keeps_the_diagnosed_run():
         Scenario(filter={"loose_fix_prior_fallback": "posterior"})
     assert Scenario(filter={"loose_fix_prior_fallback": "refuse"}).cell_key() == Scenario().cell_key()
     sweep = load_sweep("configs/quick.yaml")
-    sc = sweep.cells[0].scenario
+    sc = _with_filter(sweep.cells[0].scenario, loose_fix_fit_one_wild_beam=False)  # the keys of the test's writing
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
     data = sc.model_dump(mode="json")
@@ -68,52 +68,57 @@ def _with_filter(scenario: Scenario, **options) -> Scenario:
     return Scenario(**{**data, "filter": {**data["filter"], **options}})
 
 
+def _diagnosed_outlier_run():
+    """Section 11's diagnosed run: realism's 5 % outlier cell as it was then (the fit test on, no one-wild-beam
+    rule), run 9; (that scenario, a function running loose-dvl on the run's vehicle data and filter seed with
+    any other filter settings: its metrics)."""
+    sweep = load_sweep("configs/realism.yaml")
+    cell = next(c.scenario for c in sweep.cells if c.scenario.faults.outlier_fraction == 0.05
+                and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
+    sc = _with_filter(cell, loose_fix_fit_test=True, loose_fix_fit_one_wild_beam=False)
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
+    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
+    return sc, lambda s: run_method(s, "loose-dvl", vehicle,
+                                    np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+
+
 def test_the_fit_test_is_an_option_neutral_when_on_and_needs_heading_offsets():
     assert Scenario(filter={"loose_fix_fit_test": True}).cell_key() == Scenario(
         filter={"loose_fix_fit_test": True, "recovery": "global"}).cell_key()
     assert "loose_fix_fit_test" not in str(Scenario(filter={"loose_fix_fit_test": True}).identity())
+    assert Scenario(filter={"loose_fix_fit_test": False}).filter.loose_fix_fit_one_wild_beam  # moot without the test
     assert Scenario(filter={"loose_fix_fit_test": False}).cell_key() != Scenario(
         filter={"loose_fix_fit_test": True}).cell_key()
     with pytest.raises(ValidationError, match="loose_fix_fit_test"):
         Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
-                         "loose_fix_fit_test": False})
+                         "loose_fix_fit_one_wild_beam": False, "loose_fix_fit_test": False})
 
 
 def test_outliers_starve_the_fixes_through_the_fit_test():
     """docs/filters.md 11: realism's 5 % outlier cell, run 9, as diagnosed (the fit test on): one wild range
     fails the fit, so few fixes are attempted, the KF never learns the heading and the run is lost; without
     the fit test, on the same vehicle data and filter seed, more fixes come and the run is kept."""
-    sweep = load_sweep("configs/realism.yaml")
-    cell = next(c.scenario for c in sweep.cells if c.scenario.faults.outlier_fraction == 0.05
-                and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
-    sc = _with_filter(cell, loose_fix_fit_test=True)
-    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
-    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
-    runs = {name: run_method(s, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
-            .metrics for name, s in (("fit test", sc), ("no fit test", _with_filter(sc, loose_fix_fit_test=False)))}
+    sc, run = _diagnosed_outlier_run()
+    runs = {"fit test": run(sc), "no fit test": run(_with_filter(sc, loose_fix_fit_test=False))}
     assert runs["fit test"]["diverged"] and runs["fit test"]["final_horizontal_error_m"] > 100.0
     assert runs["fit test"]["fixes_accepted"] <= 5
     assert not runs["no fit test"]["diverged"] and runs["no fit test"]["final_horizontal_error_m"] < 10.0
     assert runs["no fit test"]["fixes_accepted"] > 2 * runs["fit test"]["fixes_accepted"]
 
 
-def test_one_wild_beam_is_an_option_neutral_when_off_and_needs_the_fit_test():
-    assert Scenario(filter={"loose_fix_fit_one_wild_beam": False}).cell_key() == Scenario(
-        filter={"loose_fix_fit_test": True}).cell_key()
-    assert Scenario(filter={"loose_fix_fit_one_wild_beam": True}).cell_key() != Scenario().cell_key()
+def test_one_wild_beam_is_the_default_neutral_when_off_and_needs_heading_offsets():
+    """docs/filters.md 11.3: on by default; off is the behaviour before the option (no key field)."""
+    assert Scenario().filter.loose_fix_fit_one_wild_beam
+    assert "loose_fix_fit_one_wild_beam" not in str(Scenario(filter={"loose_fix_fit_one_wild_beam": False}).identity())
+    assert "loose_fix_fit_one_wild_beam" in str(Scenario().identity())
+    assert Scenario().cell_key() == Scenario(filter={"loose_fix_fit_one_wild_beam": True}).cell_key()
     with pytest.raises(ValidationError, match="loose_fix_fit_one_wild_beam"):
-        Scenario(filter={"loose_fix_fit_one_wild_beam": True, "loose_fix_fit_test": False})
+        Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None})
 
 
 def test_one_wild_beam_keeps_the_diagnosed_outlier_run():
     """docs/filters.md 11.2: the run of section 11's diagnosis, on the same vehicle data and filter seed, with
     an update failing the fit by one beam leaving the count: more fixes, and the run is kept."""
-    sweep = load_sweep("configs/realism.yaml")
-    cell = next(c.scenario for c in sweep.cells if c.scenario.faults.outlier_fraction == 0.05
-                and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
-    sc = _with_filter(cell, loose_fix_fit_test=True)
-    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
-    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
-    m = run_method(_with_filter(sc, loose_fix_fit_one_wild_beam=True), "loose-dvl", vehicle,
-                   np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+    sc, run = _diagnosed_outlier_run()
+    m = run(_with_filter(sc, loose_fix_fit_one_wild_beam=True))
     assert not m["diverged"] and m["final_horizontal_error_m"] < 10.0 and m["fixes_accepted"] > 8

@@ -43,13 +43,13 @@ def with_global(scenario: Scenario) -> Scenario:
     return Scenario(**data)
 
 
-def jobs() -> list:
-    out = []
+def distinct_cells(guards: dict):
+    """(label, name, scenario, root seed, runs, the sweep's methods) of every distinct cell of the unseen worlds
+    J25-J40 (10 runs each, label "unseen") and of the ``guards`` (group -> (sweep, runs per cell))."""
     sweeps = [(w, str(UNSEEN_DIR / f"{w}.yaml"), 10) for w in UNSEEN_WORLDS]
-    sweeps += [(group, path, runs) for group, (path, runs) in GUARDS.items()]
+    sweeps += [(group, path, runs) for group, (path, runs) in guards.items()]
     for group, path, runs in sweeps:
         sweep = load_sweep(path)
-        methods = [m for m in sweep.spec.methods if m in TIGHT]
         seen = set()
         for cell in sweep.cells:
             if cell.cell_id in seen:
@@ -57,7 +57,14 @@ def jobs() -> list:
             seen.add(cell.cell_id)
             label = "unseen" if group.startswith("J") else group
             name = group if label == "unseen" else f"{group}:{cell.cell_id[:8]}"
-            out += [(label, name, cell.scenario, sweep.spec.seed, r, methods) for r in range(runs)]
+            yield label, name, cell.scenario, sweep.spec.seed, runs, sweep.spec.methods
+
+
+def jobs() -> list:
+    out = []
+    for label, name, scenario, seed, runs, methods in distinct_cells(GUARDS):
+        tight = [m for m in methods if m in TIGHT]
+        out += [(label, name, scenario, seed, r, tight) for r in range(runs)]
     return out
 
 

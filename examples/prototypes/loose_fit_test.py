@@ -18,11 +18,10 @@ prints the section's rules.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from global_recovery import UNSEEN_DIR, UNSEEN_WORLDS
+from global_recovery import distinct_cells
 from loose_fix_gate import _t_interval, sign_test_p, write_rows
 from tanbench.config import Scenario
 from tanbench.methods import get, run_method
@@ -45,6 +44,14 @@ GUARDS = {"zhou2017": ("configs/zhou2017.yaml", 50), "ci": ("configs/ci.yaml", 8
           "monterey": ("configs/monterey.yaml", 20), "realism": ("configs/realism.yaml", 20)}
 FIELDS = ["group", "cell", "run", "arm", "diverged", "final_horizontal_error_m", "mean_horizontal_error_m",
           "fixes_accepted", "fixes_rejected", "reinitialisations", "filter_wall_s"]
+
+
+def as_tested(scenario: Scenario) -> Scenario:
+    """The defaults as they were when both candidates were tested: ``loose_fix_fit_one_wild_beam`` off (its
+    neutral value; the default since section 11.3), so the pairs keep their keys and seeds."""
+    data = scenario.model_dump(mode="json")
+    data["filter"]["loose_fix_fit_one_wild_beam"] = False
+    return Scenario(**data)
 
 
 def with_candidate(scenario: Scenario, candidate: str) -> Scenario:
@@ -70,21 +77,10 @@ def test_cells() -> list:
 
 def jobs(candidate: str) -> list:
     seed = CANDIDATES[candidate][1]
-    out = [("test", table, scenario, seed, r) for table, scenario in test_cells() for r in range(TEST_RUNS)]
-    sweeps = [(w, str(UNSEEN_DIR / f"{w}.yaml"), 10) for w in UNSEEN_WORLDS]
-    sweeps += [(group, path, runs) for group, (path, runs) in GUARDS.items()]
-    for group, path, runs in sweeps:
-        sweep = load_sweep(path)
-        if METHOD not in sweep.spec.methods:
-            continue
-        seen = set()
-        for cell in sweep.cells:
-            if cell.cell_id in seen:
-                continue
-            seen.add(cell.cell_id)
-            label = "unseen" if group.startswith("J") else group
-            name = group if label == "unseen" else f"{group}:{cell.cell_id[:8]}"
-            out += [(label, name, cell.scenario, sweep.spec.seed, r) for r in range(runs)]
+    out = [("test", table, as_tested(scenario), seed, r) for table, scenario in test_cells() for r in range(TEST_RUNS)]
+    for label, name, scenario, root, runs, methods in distinct_cells(GUARDS):
+        if METHOD in methods:
+            out += [(label, name, as_tested(scenario), root, r) for r in range(runs)]
     return [job + (candidate,) for job in out]
 
 
