@@ -38,7 +38,12 @@ CONFIGS = {
     "loose-dvl-kf": ({"particles": 1000}, "loose-dvl"),
     "tight-dvl-500": ({"particles": 500}, "tight-dvl"),
     "tight-dvl-2000": ({"particles": 2000}, "tight-dvl"),
-    "tight-dvl-navdist": ({"particles": 1000, "filter": {"distance_innovation": "navigation"}}, "tight-dvl"),
+    # the navigation reading pins the heading and diverges often: with the default global recovery every divergence
+    # searches the map (143 s for this test alone, against 9 s without, 4 December); the claim is about the distance
+    # innovation, so this configuration re-draws around its estimate (the recovery of before 4 December; the seeds
+    # do not change)
+    "tight-dvl-navdist": ({"particles": 1000, "filter": {"distance_innovation": "navigation", "recovery": "estimate"}},
+                          "tight-dvl"),
 }
 
 
