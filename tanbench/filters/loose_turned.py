@@ -35,9 +35,11 @@ but does not count towards reopening the KF. With ``prior_fallback``
 the PF's posterior mean with the window prior's covariance and goes on to the KF's own gates.
 A fix is attempted after ``divergence_steps`` updates in a row with a cloud std below
 ``loose_converged_std_m`` and, with ``fit_test`` (``filter.loose_fix_fit_test``), a best particle
-whose mean d^2 / v over the beams is below (divergence_sigma / 2)^2; one wild range on one beam
-(``faults.outlier_fraction``) or an update without bottom lock fails that fit and restarts the count
-(docs/filters.md 11).
+whose mean d^2 / v over the beams is below (divergence_sigma / 2)^2. One wild range on one beam
+(``faults.outlier_fraction``) or an update without bottom lock fails that fit; with ``fit_neutral``
+(``filter.loose_fix_fit_one_wild_beam``, the default since docs/filters.md 11.3) such an update leaves
+the count as it is (:func:`fit_without_worst_beam` judges the one wild beam), without it the count
+restarts (docs/filters.md 11).
 Everything else (fix interval, chi-square gate, floor, reopening a locked-out KF,
 divergence, keep-on-map) is the built-in loop's.
 """
@@ -307,11 +309,11 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
         spread = math.sqrt(v[0] + v[1])
         healthy = spread < converged_std and best < consistent_chi
         ready = healthy if fit_test else spread < converged_std
-        if (fit_neutral and fit_test and spread < converged_std and not ready
-                and (best == np.inf or fit_without_worst_beam(x, ll, vec, grid, lik, consts, att, no_distance, one)
-                     < consistent_chi)):
-            pass  # no bottom lock, or one wild beam: the count stays
-        else:
+        # with fit_neutral, an update that fails the fit for want of bottom lock or by one wild beam leaves the count
+        count_stays = (fit_neutral and fit_test and spread < converged_std and not healthy
+                       and (best == np.inf or fit_without_worst_beam(x, ll, vec, grid, lik, consts, att, no_distance,
+                                                                     one) < consistent_chi))
+        if not count_stays:
             good = good + 1 if ready else 0
         locked = locked or healthy
         since_fix += 1

@@ -91,7 +91,8 @@ def compute_increments(dt, pos, pitch, roll, yaw, update_idx) -> np.ndarray:
     """The (K, 12) increments table for the intervals between ``update_idx`` samples."""
     update_idx = np.ascontiguousarray(update_idx, dtype=np.int64)
     out = np.empty((max(update_idx.size - 1, 0), N_INCREMENTS))
-    interval_increments(dt, *(read_only(np.ascontiguousarray(a)) for a in (pos, pitch, roll, yaw, update_idx)), out)
+    interval_increments(dt, *(read_only(np.ascontiguousarray(a)) for a in (pos, pitch, roll, yaw)), read_only(update_idx),
+                        out)
     return out
 
 

@@ -89,8 +89,8 @@ class Map:
         n = np.asarray(n, dtype=np.float64)
         shape = np.broadcast_shapes(e.shape, n.shape)
         out = np.empty(shape)
-        bilinear_many(*self.kernel_args(), read_only(np.ascontiguousarray(np.broadcast_to(e, shape).ravel())),
-                      read_only(np.ascontiguousarray(np.broadcast_to(n, shape).ravel())), out.reshape(-1))
+        bilinear_many(*self.kernel_args(), read_only(np.broadcast_to(e, shape).ravel()),
+                      read_only(np.broadcast_to(n, shape).ravel()), out.reshape(-1))
         return out
 
     def node_coords(self) -> tuple[np.ndarray, np.ndarray]:
