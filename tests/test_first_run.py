@@ -421,3 +421,30 @@ def test_the_warm_up_compiles_one_signature_per_wrapped_kernel():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     counts = json.loads(out.stdout.strip().splitlines()[-1])
     assert counts == {f"{m}.{k}": 1 for m, k in ONE_SIGNATURE_KERNELS.items()}
+
+
+THIN_FILL_WRAPPERS = {"tanbench.filters.rng.fill_normals", "tanbench.filters.rng.fill_uniforms"}
+
+
+def test_a_cold_loose_warm_up_compiles_each_jitted_kernel_once(tmp_path):
+    """On an empty cache every kernel the loose filter reaches, jitted callees included, compiles one
+    signature: a caller passing a literal 0 or 1 where the others pass a run-time integer compiled the whole
+    likelihood pass a second time (about 5 s of the first run, found 4 December). The random-number fills'
+    two-line wrappers are allowed one signature per array rank; what they call compiles once."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    code = ("import gc, json\n"
+            "from numba.core.registry import CPUDispatcher\n"
+            "from tanbench.runner.executors import warm_up\n"
+            "warm_up(None, ('loose-dvl',))\n"
+            "print(json.dumps({f'{d.py_func.__module__}.{d.py_func.__qualname__}': len(d.signatures)"
+            " for d in gc.get_objects() if isinstance(d, CPUDispatcher)"
+            " and d.py_func.__module__.startswith('tanbench')}))\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT, env=env)
+    counts = json.loads(out.stdout.strip().splitlines()[-1])
+    assert counts["tanbench.filters.likelihood.loglik_tight_pass"] == 1  # compiled here, not loaded
+    assert {k: n for k, n in counts.items() if n > 1 and k not in THIN_FILL_WRAPPERS} == {}

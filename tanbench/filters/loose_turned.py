@@ -168,11 +168,14 @@ def fit_without_worst_beam(x, ll, vec, grid, lik, consts, att, no_distance, one)
     total = 0.0
     worst = 0.0
     beams = vec.shape[0]
+    # run-time integers, not literals: a literal 0 or 1 would compile the likelihood pass (and all it
+    # calls) a second time for this caller alone, about 5 s of a first run
+    first, count = np.int64(0), np.int64(1)
     for b in range(beams):
         for c in range(3):
             one.vec[0, c] = vec[b, c]
-        fit = loglik_tight_pass(one.x, 0, one.vec, grid, lik, consts, att, one.dist, no_distance,
-                                work_block(one.work, 1), one.ll)
+        fit = loglik_tight_pass(one.x, first, one.vec, grid, lik, consts, att, one.dist, no_distance,
+                                work_block(one.work, count), one.ll)
         total += fit
         worst = max(worst, fit)
     if beams >= 3:
@@ -254,7 +257,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
     dist_buf = np.zeros(2 * block)  # unused (no distance innovation), shaped as the tight loop's
     no_distance = steps < 0  # False, but a run-time bool as in the tight loop's call: one compile of the pass
-    one = OneParticle(np.zeros((N_TIGHT, 1)), np.empty((1, 3)), new_likelihood_work(1, 4 * grid.grids), np.zeros((2, 1)),
+    one = OneParticle(np.zeros((N_TIGHT, 1)), np.empty((1, 3)), new_likelihood_work(np.int64(1), 4 * grid.grids), np.zeros((2, 1)),
                       np.empty(1))
     noise_buf = np.empty(3 * block)
     work = new_likelihood_work(block, 4 * grid.grids)

@@ -448,13 +448,13 @@ def _fill_jit(rng, out, normal, low, high):
 @nb.njit(cache=True)
 def fill_normals(rng, out):
     """Standard normals into ``out`` (any shape, C-contiguous), in memory order."""
-    _fill(rng, out, True, 0.0, 1.0)
+    _fill(rng, out.reshape(-1), True, 0.0, 1.0)  # flat: the fill compiles once, whatever ``out``'s shape
 
 
 @nb.njit(cache=True)
 def fill_uniforms(rng, out, low=0.0, high=1.0):
     """Uniforms in [low, high) into ``out`` (any shape, C-contiguous), in memory order."""
-    _fill(rng, out, False, low, high)
+    _fill(rng, out.reshape(-1), False, low, high)
 
 
 # ---- the generator objects -----------------------------------------------------------------
