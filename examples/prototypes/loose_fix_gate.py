@@ -10,6 +10,7 @@ once without and once with the gate at 13.8, on the same data and seed. The arms
     .venv/bin/python examples/prototypes/loose_fix_gate.py --diagnose SWEEP.yaml RUN [CELL [GATE]]
     .venv/bin/python examples/prototypes/loose_fix_gate.py --paired SWEEP.yaml RUNS
     .venv/bin/python examples/prototypes/loose_fix_gate.py --fallback OUT.csv   # section 9.1's test
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --gate-again OUT.csv  # section 12's test
 
 ``--paired`` runs every loose-dvl run of a sweep's distinct cells with the gate on and off on the
 same vehicle data and filter seed, the seeds of each cell with the gate at 13.8 in its key (the
@@ -101,10 +102,16 @@ FALLBACK_SWEEPS = {"zhou2017": ("configs/zhou2017.yaml", 50), "ci": ("configs/ci
                    "realism": ("configs/realism.yaml", 20)}
 
 
-def fallback_jobs() -> list:
+# section 12: section 9's synthetic cells under a root seed of their own (Monterey and the sweeps keep theirs)
+GATE_AGAIN_ROOT = 6122026
+
+
+def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
     """Section 9.1's design: section 9's cells, then every distinct cell of three committed sweeps with
-    their own seeds (the defaults' keys), each run at the defaults and with the gate and its fallback."""
-    jobs = [(name, sc, root, r, "posterior") for name, (sc, root, runs) in cells().items() for r in range(runs)]
+    their own seeds (the defaults' keys), each run at the defaults and with the gate and its ``fallback``
+    (section 12: ``refuse``, section 9's cells under ``root``)."""
+    jobs = [(name, sc, root if root is not None and not name.startswith("Monterey") else cell_root, r, fallback)
+            for name, (sc, cell_root, runs) in cells().items() for r in range(runs)]
     for label, (path, runs) in FALLBACK_SWEEPS.items():
         sweep = load_sweep(path)
         seen = set()
@@ -112,13 +119,14 @@ def fallback_jobs() -> list:
             if cell.cell_id in seen:
                 continue
             seen.add(cell.cell_id)
-            jobs += [(f"{label}:{cell.cell_id[:8]}", cell.scenario, sweep.spec.seed, r, "posterior") for r in range(runs)]
+            jobs += [(f"{label}:{cell.cell_id[:8]}", cell.scenario, sweep.spec.seed, r, fallback) for r in range(runs)]
     return jobs
 
 
-def fallback_ablation(out_csv: str, workers: int) -> None:
-    write_rows(out_csv, FIELDS, _pair, fallback_jobs(), workers)
-    fallback_summary(out_csv)
+def fallback_ablation(out_csv: str, workers: int, again: bool = False) -> None:
+    jobs = fallback_jobs("refuse", GATE_AGAIN_ROOT) if again else fallback_jobs()
+    write_rows(out_csv, FIELDS, _pair, jobs, workers)
+    fallback_summary(out_csv, "gate" if again else "fallback")
 
 
 def _t_interval(diff):
@@ -129,8 +137,9 @@ def _t_interval(diff):
     return mean, mean - t * sem, mean + t * sem
 
 
-def fallback_summary(path: str) -> None:
-    """Section 9.1's four rules on the CSV of :func:`fallback_ablation`."""
+def fallback_summary(path: str, arm: str = "fallback") -> None:
+    """Section 9.1's four rules (section 12's too) on the CSV of :func:`fallback_ablation`; ``arm`` names the
+    candidate in the printout."""
     import pandas as pd
 
     df = pd.read_csv(path)
@@ -149,16 +158,16 @@ def fallback_summary(path: str) -> None:
         diff = (kept[("final_horizontal_error_m", "gate")] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
         out[label] = (len(g), int(d0.sum()), int(d1.sum()), b, c, _t_interval(diff) if diff.size > 1 else None)
         m = out[label][5]
-        print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with the fallback {int(d1.sum())}; "
-              f"discordant b = {b} (defaults only), c = {c} (fallback only); one-sided sign test p = "
-              f"{sign_test_p(b, c):.4f}; final error fallback - defaults "
+        print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with the {arm} {int(d1.sum())}; "
+              f"discordant b = {b} (defaults only), c = {c} ({arm} only); one-sided sign test p = "
+              f"{sign_test_p(b, c):.4f}; final error {arm} - defaults "
               + (f"{m[0]:+.3f} m [{m[1]:+.3f}, {m[2]:+.3f}]" if m else "n/a"))
     ff, re, mo = (out[k] for k in groups)
     print(f"R1 (fault-free lost runs, p < 0.05): {'holds' if sign_test_p(ff[3], ff[4]) < 0.05 else 'fails'}")
     print(f"R2 (realism: c <= b): {'holds' if re[4] <= re[3] else 'fails'}")
     print(f"R3 (accuracy: fault-free upper <= +0.2 m, realism upper <= +1.0 m): "
           f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 else 'fails'}")
-    print(f"R4 (Monterey: 0 lost with the fallback): {'holds' if mo[2] == 0 else 'fails'}")
+    print(f"R4 (Monterey: 0 lost with the {arm}): {'holds' if mo[2] == 0 else 'fails'}")
 
 
 def sign_test_p(b: int, c: int) -> float:
@@ -293,6 +302,10 @@ if __name__ == "__main__":
         fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
     elif args[:1] == ["--fallback-summary"]:
         fallback_summary(args[1])
+    elif args[:1] == ["--gate-again"]:
+        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, again=True)
+    elif args[:1] == ["--gate-again-summary"]:
+        fallback_summary(args[1], "gate")
     elif args[:1] == ["--paired"]:
         paired_sweep(args[1], int(args[2]))
     elif args[:1] == ["--diagnose"]:
