@@ -26,6 +26,8 @@ LIKELIHOOD = {"student-t": 1, "gaussian": 0}  # beam density of the map-aware ke
 LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")
 # what the loose TAN does with a terrain-only fix that fails filter.loose_fix_prior_gate (docs/filters.md 9.1)
 LOOSE_FIX_PRIOR_FALLBACK = ("refuse", "posterior")
+# what the loose TAN's first fix after a (re)initialisation sets the KF's position to (docs/filters.md 13)
+LOOSE_FIRST_FIX = ("terrain-only", "posterior")
 # which tight-filter states the regularisation jitters (state indices in filters/tight.py)
 REGULARISED_STATES = ("position-heading-biases", "heading-biases", "biases")
 

@@ -11,6 +11,7 @@ once without and once with the gate at 13.8, on the same data and seed. The arms
     .venv/bin/python examples/prototypes/loose_fix_gate.py --paired SWEEP.yaml RUNS
     .venv/bin/python examples/prototypes/loose_fix_gate.py --fallback OUT.csv   # section 9.1's test
     .venv/bin/python examples/prototypes/loose_fix_gate.py --gate-again OUT.csv  # section 12's test
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --first-fix OUT.csv   # section 13's test
 
 ``--paired`` runs every loose-dvl run of a sweep's distinct cells with the gate on and off on the
 same vehicle data and filter seed, the seeds of each cell with the gate at 13.8 in its key (the
@@ -74,7 +75,12 @@ def _pair(job):
     vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
     fseed = keyed_filter_seed(root, scenario.cell_key(), get("loose-dvl").seed_id, run)
     rows = []
-    for arm, sc in (("defaults", scenario), ("gate", with_gate(scenario, GATE, fallback))):
+    if fallback == FIRST_FIX:  # section 13's candidate: the first fix resets the KF to the cloud's posterior
+        candidate = ("first-fix", Scenario(**{**scenario.model_dump(mode="json"), "filter": {
+            **scenario.model_dump(mode="json")["filter"], "loose_first_fix": "posterior"}}))
+    else:
+        candidate = ("gate", with_gate(scenario, GATE, fallback))
+    for arm, sc in (("defaults", scenario), candidate):
         m = run_method(sc, "loose-dvl", vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
         rows.append({"cell": name, "run": run, "arm": arm, **{k: m[k] for k in FIELDS[3:]}})
     return rows
@@ -104,6 +110,9 @@ FALLBACK_SWEEPS = {"zhou2017": ("configs/zhou2017.yaml", 50), "ci": ("configs/ci
 
 # section 12: section 9's synthetic cells under a root seed of their own (Monterey and the sweeps keep theirs)
 GATE_AGAIN_ROOT = 6122026
+# section 13: the first fix from the cloud's posterior (filter.loose_first_fix: posterior), its own root seed
+FIRST_FIX = "first-fix-posterior"
+FIRST_FIX_ROOT = 7122026
 
 
 def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
@@ -123,10 +132,11 @@ def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
     return jobs
 
 
-def fallback_ablation(out_csv: str, workers: int, again: bool = False) -> None:
-    jobs = fallback_jobs("refuse", GATE_AGAIN_ROOT) if again else fallback_jobs()
+def fallback_ablation(out_csv: str, workers: int, again: bool = False, first_fix: bool = False) -> None:
+    jobs = (fallback_jobs(FIRST_FIX, FIRST_FIX_ROOT) if first_fix else
+            fallback_jobs("refuse", GATE_AGAIN_ROOT) if again else fallback_jobs())
     write_rows(out_csv, FIELDS, _pair, jobs, workers)
-    fallback_summary(out_csv, "gate" if again else "fallback")
+    fallback_summary(out_csv, "first-fix" if first_fix else "gate" if again else "fallback")
 
 
 def _t_interval(diff):
@@ -152,10 +162,11 @@ def fallback_summary(path: str, arm: str = "fallback") -> None:
     out = {}
     for label, mask in groups.items():
         g = wide[mask]
-        d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", "gate")].astype(bool)
+        col = "first-fix" if arm == "first-fix" else "gate"  # the CSV's candidate arm
+        d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", col)].astype(bool)
         b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
         kept = g[~d0 & ~d1]
-        diff = (kept[("final_horizontal_error_m", "gate")] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
+        diff = (kept[("final_horizontal_error_m", col)] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
         out[label] = (len(g), int(d0.sum()), int(d1.sum()), b, c, _t_interval(diff) if diff.size > 1 else None)
         m = out[label][5]
         print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with the {arm} {int(d1.sum())}; "
@@ -306,6 +317,10 @@ if __name__ == "__main__":
         fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, again=True)
     elif args[:1] == ["--gate-again-summary"]:
         fallback_summary(args[1], "gate")
+    elif args[:1] == ["--first-fix"]:
+        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, first_fix=True)
+    elif args[:1] == ["--first-fix-summary"]:
+        fallback_summary(args[1], "first-fix")
     elif args[:1] == ["--paired"]:
         paired_sweep(args[1], int(args[2]))
     elif args[:1] == ["--diagnose"]:

@@ -77,9 +77,11 @@ TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
 # whether such a fix is replaced by the PF's posterior mean with the window prior's covariance (else refused), and
 # whether the updates before a fix must fit (the best particle's mean d^2 / v below (divergence_sigma / 2)^2) besides
 # having a cloud std below loose_converged_std_m (filter.loose_fix_fit_test), and whether, with the fit test, an update
-# that fails it by one beam only, or has no bottom lock, leaves the count as it is (filter.loose_fix_fit_one_wild_beam)
-Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test fit_neutral",
-                   defaults=(np.inf, False, True, False))
+# that fails it by one beam only, or has no bottom lock, leaves the count as it is (filter.loose_fix_fit_one_wild_beam),
+# and whether the first fix after a (re)initialisation resets the KF's position to the cloud's posterior (mean and
+# covariance) instead of the terrain-only fix (filter.loose_first_fix)
+Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test fit_neutral first_posterior",
+                   defaults=(np.inf, False, True, False, False))
 # a one-particle cloud, its beam, work arrays, distance rows and log-likelihood (fit_without_worst_beam)
 OneParticle = namedtuple("OneParticle", "x vec work dist ll")
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
@@ -229,7 +231,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
     out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
-    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral = gates
+    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral, first_posterior = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]
@@ -347,6 +349,12 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
                 if first_fix:
+                    if first_posterior:  # a reset replaces the KF's prior, which the cloud started from: its posterior
+                        zt[0] = mean[0]
+                        zt[1] = mean[1]
+                        copy_matrix(r, cov)
+                        r[0, 0] += kf.r_floor * kf.r_floor
+                        r[1, 1] += kf.r_floor * kf.r_floor
                     position_reset(p_kf, r)
                     nav[E, 0] = zt[0]
                     nav[N, 0] = zt[1]
