@@ -122,3 +122,25 @@ def test_one_wild_beam_keeps_the_diagnosed_outlier_run():
     sc, run = _diagnosed_outlier_run()
     m = run(_with_filter(sc, loose_fix_fit_one_wild_beam=True))
     assert not m["diverged"] and m["final_horizontal_error_m"] < 10.0 and m["fixes_accepted"] > 8
+
+
+def test_the_first_fix_from_the_posterior_is_an_option_and_keeps_section_7_4s_lost_run():
+    """docs/filters.md 13: ``filter.loose_first_fix: posterior`` (not adopted, 13.1) resets the KF at the first fix
+    to the cloud's posterior. Section 7.4's lost run (area A as configs/methods.yaml's budget-default cell, run 28,
+    2000 particles) is reset at 36 s to a terrain-only fix about 270 m from the cloud and never recovers; from the
+    posterior, on the same vehicle data and filter seed, it ends within metres."""
+    assert Scenario().filter.loose_first_fix == "terrain-only"
+    assert Scenario(filter={"loose_first_fix": "terrain-only"}).cell_key() == Scenario().cell_key()
+    with pytest.raises(ValidationError, match="loose_first_fix"):
+        Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+                         "loose_fix_fit_one_wild_beam": False, "loose_first_fix": "posterior"})
+    root = 14140014  # configs/methods.yaml
+    sc = Scenario(terrain={"kind": "synthetic", "seed": 1}, area="A", map_resolution_m=10, noise_m=1.0,
+                  sampling_time_s=1, particles=2000)
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(root, sc.pairing_key(), 28))
+    fseed = keyed_filter_seed(root, sc.cell_key(), get("loose-dvl").seed_id, 28)
+    runs = {name: run_method(s, "loose-dvl", vehicle,
+                             np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+            for name, s in (("defaults", sc), ("posterior", _with_filter(sc, loose_first_fix="posterior")))}
+    assert runs["defaults"]["final_horizontal_error_m"] > 100.0 and runs["defaults"]["fixes_accepted"] == 1
+    assert runs["posterior"]["final_horizontal_error_m"] < 10.0
