@@ -23,7 +23,18 @@ from tanbench import results
 from tanbench.config import FilterSpec, Scenario, new_option
 from tanbench.sweep import load_sweep
 
-COMMITTED = sorted(p.parent for p in (ROOT / "results").glob("*/sweep.yaml"))
+def _committed_result_dirs() -> list[Path]:
+    """results/*/ with a sweep.yaml, less the directories .gitignore keeps out of the repository (results/ci,
+    results/quick, ...: a local `make ci-check` or `make run` leaves them, written by whatever code ran then)."""
+    import fnmatch
+
+    ignored = [line.strip().rstrip("/") for line in (ROOT / ".gitignore").read_text().splitlines()
+               if line.strip().startswith("results/")]
+    return sorted(p.parent for p in (ROOT / "results").glob("*/sweep.yaml")
+                  if not any(fnmatch.fnmatch(f"results/{p.parent.name}", pattern) for pattern in ignored))
+
+
+COMMITTED = _committed_result_dirs()
 
 
 def extended_scenario(default=5.0, neutral=5.0):
