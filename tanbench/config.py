@@ -31,7 +31,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
-                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
+                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK, LOOSE_REOPEN_HEADING, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
                               POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION,
                               REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
@@ -468,6 +468,10 @@ class FilterSpec(_Strict):
         "terrain-only", description="loose TAN with heading offsets: the first fix after a (re)initialisation resets the "
                                     "KF's position to the terrain-only fix, or to the cloud's posterior mean and "
                                     "covariance (docs/filters.md 13) [terrain-only]")
+    loose_reopen_heading: choices(LOOSE_REOPEN_HEADING) = new_option(
+        "navigation", description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes "
+                                  "keeps its own heading, or takes the cloud's weighted mean heading (docs/filters.md "
+                                  "14) [navigation]")
     recovery: choices(RECOVERY) = new_option(
         "global", neutral="estimate",
         description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "
@@ -511,6 +515,8 @@ class FilterSpec(_Strict):
         if self.loose_fix_fit_one_wild_beam and not self.loose_heading_offsets:
             raise ValueError("filter.loose_fix_fit_one_wild_beam: true needs filter.loose_heading_offsets: true "
                              "(set it to false without it)")
+        if self.loose_reopen_heading != "navigation" and not self.loose_heading_offsets:
+            raise ValueError("filter.loose_reopen_heading: cloud needs filter.loose_heading_offsets: true")
         if self.loose_first_fix != "terrain-only" and not self.loose_heading_offsets:
             raise ValueError("filter.loose_first_fix: posterior needs filter.loose_heading_offsets: true")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:

@@ -28,6 +28,8 @@ LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")
 LOOSE_FIX_PRIOR_FALLBACK = ("refuse", "posterior")
 # what the loose TAN's first fix after a (re)initialisation sets the KF's position to (docs/filters.md 13)
 LOOSE_FIRST_FIX = ("terrain-only", "posterior")
+# the heading a loose TAN's KF keeps when it is reopened after rejected fixes (docs/filters.md 14)
+LOOSE_REOPEN_HEADING = ("navigation", "cloud")
 # which tight-filter states the regularisation jitters (state indices in filters/tight.py)
 REGULARISED_STATES = ("position-heading-biases", "heading-biases", "biases")
 

@@ -12,6 +12,7 @@ once without and once with the gate at 13.8, on the same data and seed. The arms
     .venv/bin/python examples/prototypes/loose_fix_gate.py --fallback OUT.csv   # section 9.1's test
     .venv/bin/python examples/prototypes/loose_fix_gate.py --gate-again OUT.csv  # section 12's test
     .venv/bin/python examples/prototypes/loose_fix_gate.py --first-fix OUT.csv   # section 13's test
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --reopen OUT.csv      # section 14's test
 
 ``--paired`` runs every loose-dvl run of a sweep's distinct cells with the gate on and off on the
 same vehicle data and filter seed, the seeds of each cell with the gate at 13.8 in its key (the
@@ -75,9 +76,10 @@ def _pair(job):
     vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
     fseed = keyed_filter_seed(root, scenario.cell_key(), get("loose-dvl").seed_id, run)
     rows = []
-    if fallback == FIRST_FIX:  # section 13's candidate: the first fix resets the KF to the cloud's posterior
-        candidate = ("first-fix", Scenario(**{**scenario.model_dump(mode="json"), "filter": {
-            **scenario.model_dump(mode="json")["filter"], "loose_first_fix": "posterior"}}))
+    if fallback in OPTION_CANDIDATES:  # sections 13 and 14: an option's other value
+        arm, options = OPTION_CANDIDATES[fallback]
+        data = scenario.model_dump(mode="json")
+        candidate = (arm, Scenario(**{**data, "filter": {**data["filter"], **options}}))
     else:
         candidate = ("gate", with_gate(scenario, GATE, fallback))
     for arm, sc in (("defaults", scenario), candidate):
@@ -113,6 +115,12 @@ GATE_AGAIN_ROOT = 6122026
 # section 13: the first fix from the cloud's posterior (filter.loose_first_fix: posterior), its own root seed
 FIRST_FIX = "first-fix-posterior"
 FIRST_FIX_ROOT = 7122026
+# section 14: a reopened KF takes the cloud's heading (filter.loose_reopen_heading: cloud), its own root seed
+REOPEN = "reopen-heading-cloud"
+REOPEN_ROOT = 8122026
+# candidate -> (its arm's name in the CSV, its filter settings)
+OPTION_CANDIDATES = {FIRST_FIX: ("first-fix", {"loose_first_fix": "posterior"}),
+                     REOPEN: ("reopen", {"loose_reopen_heading": "cloud"})}
 
 
 def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
@@ -132,11 +140,12 @@ def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
     return jobs
 
 
-def fallback_ablation(out_csv: str, workers: int, again: bool = False, first_fix: bool = False) -> None:
-    jobs = (fallback_jobs(FIRST_FIX, FIRST_FIX_ROOT) if first_fix else
+def fallback_ablation(out_csv: str, workers: int, again: bool = False, first_fix: bool = False,
+                      reopen: bool = False) -> None:
+    jobs = (fallback_jobs(REOPEN, REOPEN_ROOT) if reopen else fallback_jobs(FIRST_FIX, FIRST_FIX_ROOT) if first_fix else
             fallback_jobs("refuse", GATE_AGAIN_ROOT) if again else fallback_jobs())
     write_rows(out_csv, FIELDS, _pair, jobs, workers)
-    fallback_summary(out_csv, "first-fix" if first_fix else "gate" if again else "fallback")
+    fallback_summary(out_csv, "reopen" if reopen else "first-fix" if first_fix else "gate" if again else "fallback")
 
 
 def _t_interval(diff):
@@ -162,7 +171,7 @@ def fallback_summary(path: str, arm: str = "fallback") -> None:
     out = {}
     for label, mask in groups.items():
         g = wide[mask]
-        col = "first-fix" if arm == "first-fix" else "gate"  # the CSV's candidate arm
+        col = arm if arm in ("first-fix", "reopen") else "gate"  # the CSV's candidate arm
         d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", col)].astype(bool)
         b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
         kept = g[~d0 & ~d1]
@@ -321,6 +330,10 @@ if __name__ == "__main__":
         fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, first_fix=True)
     elif args[:1] == ["--first-fix-summary"]:
         fallback_summary(args[1], "first-fix")
+    elif args[:1] == ["--reopen"]:
+        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, reopen=True)
+    elif args[:1] == ["--reopen-summary"]:
+        fallback_summary(args[1], "reopen")
     elif args[:1] == ["--paired"]:
         paired_sweep(args[1], int(args[2]))
     elif args[:1] == ["--diagnose"]:

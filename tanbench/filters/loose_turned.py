@@ -79,9 +79,10 @@ TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
 # having a cloud std below loose_converged_std_m (filter.loose_fix_fit_test), and whether, with the fit test, an update
 # that fails it by one beam only, or has no bottom lock, leaves the count as it is (filter.loose_fix_fit_one_wild_beam),
 # and whether the first fix after a (re)initialisation resets the KF's position to the cloud's posterior (mean and
-# covariance) instead of the terrain-only fix (filter.loose_first_fix)
-Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test fit_neutral first_posterior",
-                   defaults=(np.inf, False, True, False, False))
+# covariance) instead of the terrain-only fix (filter.loose_first_fix), and whether a KF reopened after rejected fixes
+# takes the cloud's mean heading (filter.loose_reopen_heading)
+Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test fit_neutral first_posterior "
+                            "reopen_cloud", defaults=(np.inf, False, True, False, False, False))
 # a one-particle cloud, its beam, work arrays, distance rows and log-likelihood (fit_without_worst_beam)
 OneParticle = namedtuple("OneParticle", "x vec work dist ll")
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
@@ -144,6 +145,24 @@ def unimodal_fraction_numpy(x, w, mean, cov):
     d = np.asarray(x)[:2] - np.asarray(mean)[:2, None]
     q = np.einsum("ij,ik,kj->j", d, np.linalg.inv(cov), d)
     return float(np.asarray(w)[q <= CHI2_2_95].sum())
+
+
+@nb.njit(cache=True)
+def cloud_heading_offset(yaw, w, yaw_ref):
+    """The weighted circular mean of the particle yaws ``yaw`` (weights ``w``, summing to 1) as an angle from
+    ``yaw_ref``, in (-pi, pi]."""
+    s = 0.0
+    c = 0.0
+    for j in range(yaw.shape[0]):
+        s += w[j] * math.sin(yaw[j] - yaw_ref)
+        c += w[j] * math.cos(yaw[j] - yaw_ref)
+    return math.atan2(s, c)
+
+
+def cloud_heading_offset_numpy(yaw, w, yaw_ref):
+    """Plain-numpy reference of :func:`cloud_heading_offset`."""
+    d = np.asarray(yaw, dtype=float) - yaw_ref
+    return float(np.arctan2(np.sum(w * np.sin(d)), np.sum(w * np.cos(d))))
 
 
 @nb.njit(cache=True)
@@ -231,7 +250,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
     out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
-    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral, first_posterior = gates
+    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral, first_posterior, reopen_cloud = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]
@@ -367,6 +386,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                         rejections += 1
                         if rejections >= kf.misses:
                             reopen_kf(p_kf, p0_pos, p0_yaw)
+                            if reopen_cloud:  # the particles' yaws are absolute: the cloud's own heading
+                                nav[YAW, 0] += cloud_heading_offset(x[YAW], w, nav[YAW, 0])
                             copy_matrix(p_save, p_kf)
                             chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
                     if chi2 < kf.gate and abs(nav[BZ, 0] + dx[EB]) > bias_limit:

@@ -123,7 +123,8 @@ def _run_turned(ctx, rng, x, inc, settings, p_kf, out):
     gates = Gates(float(bias_limit), float(f.loose_fix_shape or 0.0), float(sc.sampling_time_s),
                   float(f.loose_fix_prior_gate) if f.loose_fix_prior_gate is not None else np.inf,
                   f.loose_fix_prior_fallback == "posterior", bool(f.loose_fix_fit_test),
-                  bool(f.loose_fix_fit_one_wild_beam), f.loose_first_fix == "posterior")
+                  bool(f.loose_fix_fit_one_wild_beam), f.loose_first_fix == "posterior",
+                  f.loose_reopen_heading == "cloud")
     track = TurnedTrack(inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                         np.ascontiguousarray(obs.dvl_beams), np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows]))
     loose_turned_loop(x8, rng, track, likelihood_grid(f, ctx.nmap), settings, gates, p_kf, out)
