@@ -144,3 +144,39 @@ def test_the_first_fix_from_the_posterior_is_an_option_and_keeps_section_7_4s_lo
             for name, s in (("defaults", sc), ("posterior", _with_filter(sc, loose_first_fix="posterior")))}
     assert runs["defaults"]["final_horizontal_error_m"] > 100.0 and runs["defaults"]["fixes_accepted"] == 1
     assert runs["posterior"]["final_horizontal_error_m"] < 10.0
+
+
+def test_the_cloud_heading_matches_its_numpy_reference_across_the_wrap():
+    from tanbench.filters.loose_turned import cloud_heading_offset, cloud_heading_offset_numpy
+
+    rng = np.random.default_rng(3)
+    for centre in (0.0, 3.0, -3.1, 10.0):  # particle yaws on either side of +-pi from the reference
+        yaw = centre + 0.2 * rng.standard_normal(500)
+        w = rng.random(500)
+        w /= w.sum()
+        got = cloud_heading_offset(yaw, w, 0.3)
+        assert got == pytest.approx(cloud_heading_offset_numpy(yaw, w, 0.3), abs=1e-12)
+        assert abs(got) <= np.pi
+        assert np.cos(got - (centre - 0.3)) > 0.99  # the cloud's centre, seen from the reference
+
+
+def test_the_reopened_heading_is_an_option_and_keeps_the_diagnosed_30_m_run():
+    """docs/filters.md 14: configs/zhou2017.yaml's area A 30 m cell, run 3 (lost in results/zhou2017): a fix turns
+    the KF's heading 77 degrees off while the cloud's heading stays within degrees of the truth; with
+    ``filter.loose_reopen_heading: cloud`` the reopened KF takes the cloud's heading and the run ends within metres,
+    on the same vehicle data and filter seed."""
+    assert Scenario().filter.loose_reopen_heading == "navigation"
+    assert Scenario(filter={"loose_reopen_heading": "navigation"}).cell_key() == Scenario().cell_key()
+    with pytest.raises(ValidationError, match="loose_reopen_heading"):
+        Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+                         "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "cloud"})
+    sweep = load_sweep("configs/zhou2017.yaml")
+    sc = sweep.cells[2].scenario
+    assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 30, 3000)
+    vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 3))
+    fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 3)
+    runs = {name: run_method(s, "loose-dvl", vehicle,
+                             np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
+            for name, s in (("defaults", sc), ("cloud", _with_filter(sc, loose_reopen_heading="cloud")))}
+    assert runs["defaults"]["final_horizontal_error_m"] > 100.0
+    assert runs["cloud"]["final_horizontal_error_m"] < 10.0
