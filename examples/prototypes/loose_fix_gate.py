@@ -13,6 +13,7 @@ once without and once with the gate at 13.8, on the same data and seed. The arms
     .venv/bin/python examples/prototypes/loose_fix_gate.py --gate-again OUT.csv  # section 12's test
     .venv/bin/python examples/prototypes/loose_fix_gate.py --first-fix OUT.csv   # section 13's test
     .venv/bin/python examples/prototypes/loose_fix_gate.py --reopen OUT.csv      # section 14's test
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --reopen-realism OUT.csv  # section 14.2's
 
 ``--paired`` runs every loose-dvl run of a sweep's distinct cells with the gate on and off on the
 same vehicle data and filter seed, the seeds of each cell with the gate at 13.8 in its key (the
@@ -138,6 +139,44 @@ def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
             seen.add(cell.cell_id)
             jobs += [(f"{label}:{cell.cell_id[:8]}", cell.scenario, sweep.spec.seed, r, fallback) for r in range(runs)]
     return jobs
+
+
+# section 14.2: realism's distinct cells again, runs 20-99 (runs 0-19 were section 14.1's), its own root seed
+REALISM_MORE = range(20, 100)
+
+
+def reopen_realism_jobs() -> list:
+    sweep = load_sweep(FALLBACK_SWEEPS["realism"][0])
+    seen, jobs = set(), []
+    for cell in sweep.cells:
+        if cell.cell_id not in seen:
+            seen.add(cell.cell_id)
+            jobs += [(f"realism:{cell.cell_id[:8]}", cell.scenario, sweep.spec.seed, r, REOPEN) for r in REALISM_MORE]
+    return jobs
+
+
+def reopen_realism(out_csv: str, workers: int) -> None:
+    write_rows(out_csv, FIELDS, _pair, reopen_realism_jobs(), workers)
+    reopen_realism_summary(out_csv)
+
+
+def reopen_realism_summary(path: str) -> None:
+    """Section 14.2's rule on the CSV of :func:`reopen_realism`."""
+    import pandas as pd
+
+    df = pd.read_csv(path)
+    df["diverged"] = df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])
+    g = df.pivot_table(index=["cell", "run"], columns="arm", values=["diverged", "final_horizontal_error_m"],
+                       aggfunc="first")
+    d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", "reopen")].astype(bool)
+    b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
+    kept = g[~d0 & ~d1]
+    diff = (kept[("final_horizontal_error_m", "reopen")] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
+    mean, lo, hi = _t_interval(diff)
+    print(f"realism runs 20-99: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with the candidate {int(d1.sum())}; "
+          f"b = {b}, c = {c} (one-sided sign test p = {sign_test_p(b, c):.4f}); final error candidate - defaults "
+          f"{mean:+.3f} m [{lo:+.3f}, {hi:+.3f}] over {diff.size} kept pairs (sd {diff.std(ddof=1):.2f} m)")
+    print(f"(a) upper end <= +1.0 m: {'holds' if hi <= 1.0 else 'fails'}; (b) c <= b: {'holds' if c <= b else 'fails'}")
 
 
 def fallback_ablation(out_csv: str, workers: int, again: bool = False, first_fix: bool = False,
@@ -334,6 +373,10 @@ if __name__ == "__main__":
         fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, reopen=True)
     elif args[:1] == ["--reopen-summary"]:
         fallback_summary(args[1], "reopen")
+    elif args[:1] == ["--reopen-realism"]:
+        reopen_realism(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
+    elif args[:1] == ["--reopen-realism-summary"]:
+        reopen_realism_summary(args[1])
     elif args[:1] == ["--paired"]:
         paired_sweep(args[1], int(args[2]))
     elif args[:1] == ["--diagnose"]:
