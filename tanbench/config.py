@@ -469,9 +469,10 @@ class FilterSpec(_Strict):
                                     "KF's position to the terrain-only fix, or to the cloud's posterior mean and "
                                     "covariance (docs/filters.md 13) [terrain-only]")
     loose_reopen_heading: choices(LOOSE_REOPEN_HEADING) = new_option(
-        "navigation", description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes "
-                                  "keeps its own heading, or takes the cloud's weighted mean heading (docs/filters.md "
-                                  "14) [navigation]")
+        "cloud", neutral="navigation",
+        description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes keeps its own "
+                    "heading, or takes the cloud's weighted mean heading (the default since docs/filters.md 14.2) "
+                    "[navigation]")
     recovery: choices(RECOVERY) = new_option(
         "global", neutral="estimate",
         description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "
@@ -516,7 +517,8 @@ class FilterSpec(_Strict):
             raise ValueError("filter.loose_fix_fit_one_wild_beam: true needs filter.loose_heading_offsets: true "
                              "(set it to false without it)")
         if self.loose_reopen_heading != "navigation" and not self.loose_heading_offsets:
-            raise ValueError("filter.loose_reopen_heading: cloud needs filter.loose_heading_offsets: true")
+            raise ValueError("filter.loose_reopen_heading: cloud needs filter.loose_heading_offsets: true "
+                             "(set it to navigation without it)")
         if self.loose_first_fix != "terrain-only" and not self.loose_heading_offsets:
             raise ValueError("filter.loose_first_fix: posterior needs filter.loose_heading_offsets: true")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:

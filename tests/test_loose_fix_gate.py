@@ -33,7 +33,8 @@ def test_the_diagnosed_run_is_lost_by_its_fixes_and_kept_by_the_gate():
     quick = sweep.cells[0].scenario
     sc = Scenario(**{**quick.model_dump(mode="json"),
                      "filter": {**quick.model_dump(mode="json")["filter"], "loose_fix_prior_gate": None,
-                                "recovery": "estimate", "loose_fix_fit_one_wild_beam": False}})
+                                "recovery": "estimate", "loose_fix_fit_one_wild_beam": False,
+                                "loose_reopen_heading": "navigation"}})
     assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 10, 2000)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
@@ -53,7 +54,8 @@ def test_the_fallback_needs_the_gate_and_keeps_the_diagnosed_run():
         Scenario(filter={"loose_fix_prior_fallback": "posterior"})
     assert Scenario(filter={"loose_fix_prior_fallback": "refuse"}).cell_key() == Scenario().cell_key()
     sweep = load_sweep("configs/quick.yaml")
-    sc = _with_filter(sweep.cells[0].scenario, loose_fix_fit_one_wild_beam=False)  # the keys of the test's writing
+    sc = _with_filter(sweep.cells[0].scenario, loose_fix_fit_one_wild_beam=False,  # the keys of the test's writing
+                      loose_reopen_heading="navigation")
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
     data = sc.model_dump(mode="json")
@@ -75,7 +77,7 @@ def _diagnosed_outlier_run():
     sweep = load_sweep("configs/realism.yaml")
     cell = next(c.scenario for c in sweep.cells if c.scenario.faults.outlier_fraction == 0.05
                 and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
-    sc = _with_filter(cell, loose_fix_fit_test=True, loose_fix_fit_one_wild_beam=False)
+    sc = _with_filter(cell, loose_fix_fit_test=True, loose_fix_fit_one_wild_beam=False, loose_reopen_heading="navigation")
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
     return sc, lambda s: run_method(s, "loose-dvl", vehicle,
@@ -133,10 +135,12 @@ def test_the_first_fix_from_the_posterior_is_an_option_and_keeps_section_7_4s_lo
     assert Scenario(filter={"loose_first_fix": "terrain-only"}).cell_key() == Scenario().cell_key()
     with pytest.raises(ValidationError, match="loose_first_fix"):
         Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
-                         "loose_fix_fit_one_wild_beam": False, "loose_first_fix": "posterior"})
+                         "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "navigation",
+                         "loose_first_fix": "posterior"})
     root = 14140014  # configs/methods.yaml
     sc = Scenario(terrain={"kind": "synthetic", "seed": 1}, area="A", map_resolution_m=10, noise_m=1.0,
-                  sampling_time_s=1, particles=2000)
+                  sampling_time_s=1, particles=2000,
+                  filter={"loose_reopen_heading": "navigation"})  # the keys of the test's writing
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(root, sc.pairing_key(), 28))
     fseed = keyed_filter_seed(root, sc.cell_key(), get("loose-dvl").seed_id, 28)
     runs = {name: run_method(s, "loose-dvl", vehicle,
@@ -161,17 +165,18 @@ def test_the_cloud_heading_matches_its_numpy_reference_across_the_wrap():
 
 
 def test_the_reopened_heading_is_an_option_and_keeps_the_diagnosed_30_m_run():
-    """docs/filters.md 14: configs/zhou2017.yaml's area A 30 m cell, run 3 (lost in results/zhou2017): a fix turns
-    the KF's heading 77 degrees off while the cloud's heading stays within degrees of the truth; with
-    ``filter.loose_reopen_heading: cloud`` the reopened KF takes the cloud's heading and the run ends within metres,
-    on the same vehicle data and filter seed."""
-    assert Scenario().filter.loose_reopen_heading == "navigation"
-    assert Scenario(filter={"loose_reopen_heading": "navigation"}).cell_key() == Scenario().cell_key()
+    """docs/filters.md 14: configs/zhou2017.yaml's area A 30 m cell, run 3 (lost in results/zhou2017 before 14.2): a
+    fix turns the KF's heading 77 degrees off while the cloud's heading stays within degrees of the truth; with
+    ``filter.loose_reopen_heading: cloud`` (the default since 14.2) the reopened KF takes the cloud's heading and the
+    run ends within metres, on the same vehicle data and filter seed (those of the cell before 14.2)."""
+    assert Scenario().filter.loose_reopen_heading == "cloud"
+    assert "loose_reopen_heading" not in str(Scenario(filter={"loose_reopen_heading": "navigation"}).identity())
+    assert Scenario(filter={"loose_reopen_heading": "navigation"}).cell_key() != Scenario().cell_key()
     with pytest.raises(ValidationError, match="loose_reopen_heading"):
         Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
                          "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "cloud"})
     sweep = load_sweep("configs/zhou2017.yaml")
-    sc = sweep.cells[2].scenario
+    sc = _with_filter(sweep.cells[2].scenario, loose_reopen_heading="navigation")  # the keys of the test's writing
     assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 30, 3000)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 3))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 3)

@@ -124,12 +124,19 @@ OPTION_CANDIDATES = {FIRST_FIX: ("first-fix", {"loose_first_fix": "posterior"}),
                      REOPEN: ("reopen", {"loose_reopen_heading": "cloud"})}
 
 
+def as_run_on_4_december(scenario: Scenario) -> Scenario:
+    """The defaults sections 12-14 ran against: ``loose_reopen_heading: navigation`` (its neutral value; the default
+    since section 14.2), so the pairs keep their keys and seeds."""
+    data = scenario.model_dump(mode="json")
+    return Scenario(**{**data, "filter": {**data["filter"], "loose_reopen_heading": "navigation"}})
+
+
 def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
     """Section 9.1's design: section 9's cells, then every distinct cell of three committed sweeps with
     their own seeds (the defaults' keys), each run at the defaults and with the gate and its ``fallback``
     (section 12: ``refuse``, section 9's cells under ``root``)."""
-    jobs = [(name, sc, root if root is not None and not name.startswith("Monterey") else cell_root, r, fallback)
-            for name, (sc, cell_root, runs) in cells().items() for r in range(runs)]
+    jobs = [(name, as_run_on_4_december(sc), root if root is not None and not name.startswith("Monterey") else cell_root,
+             r, fallback) for name, (sc, cell_root, runs) in cells().items() for r in range(runs)]
     for label, (path, runs) in FALLBACK_SWEEPS.items():
         sweep = load_sweep(path)
         seen = set()
@@ -137,7 +144,8 @@ def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
             if cell.cell_id in seen:
                 continue
             seen.add(cell.cell_id)
-            jobs += [(f"{label}:{cell.cell_id[:8]}", cell.scenario, sweep.spec.seed, r, fallback) for r in range(runs)]
+            sc = as_run_on_4_december(cell.scenario)
+            jobs += [(f"{label}:{sc.cell_key()[:8]}", sc, sweep.spec.seed, r, fallback) for r in range(runs)]
     return jobs
 
 
@@ -151,7 +159,8 @@ def reopen_realism_jobs() -> list:
     for cell in sweep.cells:
         if cell.cell_id not in seen:
             seen.add(cell.cell_id)
-            jobs += [(f"realism:{cell.cell_id[:8]}", cell.scenario, sweep.spec.seed, r, REOPEN) for r in REALISM_MORE]
+            sc = as_run_on_4_december(cell.scenario)
+            jobs += [(f"realism:{sc.cell_key()[:8]}", sc, sweep.spec.seed, r, REOPEN) for r in REALISM_MORE]
     return jobs
 
 
