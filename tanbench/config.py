@@ -31,9 +31,10 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
-                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK, LOOSE_REOPEN_HEADING, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
-                              POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION,
-                              REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
+                              LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK,
+                              LOOSE_REOPEN_HEADING, MAP_REPRESENTATION, MULTIBEAM_PATTERN, POSITION_NOISE_GROWTH,
+                              PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION, REGULARISED_STATES, RESAMPLING,
+                              TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 

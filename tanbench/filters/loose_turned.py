@@ -278,8 +278,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
     dist_buf = np.zeros(2 * block)  # unused (no distance innovation), shaped as the tight loop's
     no_distance = steps < 0  # False, but a run-time bool as in the tight loop's call: one compile of the pass
-    one = OneParticle(np.zeros((N_TIGHT, 1)), np.empty((1, 3)), new_likelihood_work(np.int64(1), 4 * grid.grids), np.zeros((2, 1)),
-                      np.empty(1))
+    one = OneParticle(np.zeros((N_TIGHT, 1)), np.empty((1, 3)), new_likelihood_work(np.int64(1), 4 * grid.grids),
+                      np.zeros((2, 1)), np.empty(1))
     noise_buf = np.empty(3 * block)
     work = new_likelihood_work(block, 4 * grid.grids)
     consts = beam_constants(model.sig_u, 1.0, model.outside_sigma)
@@ -365,15 +365,13 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                     usable = False  # the fix disagrees with the cloud it came from: refused, not a KF miss
                     rejected_out[k] = 1
             if usable:
+                if first_fix and first_posterior:  # a reset replaces the KF's prior, which the cloud started from
+                    zt[0] = mean[0]
+                    zt[1] = mean[1]
+                    copy_matrix(r, cov)
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
                 if first_fix:
-                    if first_posterior:  # a reset replaces the KF's prior, which the cloud started from: its posterior
-                        zt[0] = mean[0]
-                        zt[1] = mean[1]
-                        copy_matrix(r, cov)
-                        r[0, 0] += kf.r_floor * kf.r_floor
-                        r[1, 1] += kf.r_floor * kf.r_floor
                     position_reset(p_kf, r)
                     nav[E, 0] = zt[0]
                     nav[N, 0] = zt[1]
