@@ -188,12 +188,16 @@ def reopen_realism_summary(path: str) -> None:
     print(f"(a) upper end <= +1.0 m: {'holds' if hi <= 1.0 else 'fails'}; (b) c <= b: {'holds' if c <= b else 'fails'}")
 
 
-def fallback_ablation(out_csv: str, workers: int, again: bool = False, first_fix: bool = False,
-                      reopen: bool = False) -> None:
-    jobs = (fallback_jobs(REOPEN, REOPEN_ROOT) if reopen else fallback_jobs(FIRST_FIX, FIRST_FIX_ROOT) if first_fix else
-            fallback_jobs("refuse", GATE_AGAIN_ROOT) if again else fallback_jobs())
-    write_rows(out_csv, FIELDS, _pair, jobs, workers)
-    fallback_summary(out_csv, "reopen" if reopen else "first-fix" if first_fix else "gate" if again else "fallback")
+# the paired tests of sections 9.1, 12, 13 and 14.1: command-line flag -> (the candidate as _pair reads it, the root
+# seed of section 9's cells (None: section 9's own), the candidate's name in the printout)
+PAIRED_TESTS = {"--fallback": ("posterior", None, "fallback"), "--gate-again": ("refuse", GATE_AGAIN_ROOT, "gate"),
+                "--first-fix": (FIRST_FIX, FIRST_FIX_ROOT, "first-fix"), "--reopen": (REOPEN, REOPEN_ROOT, "reopen")}
+
+
+def fallback_ablation(out_csv: str, workers: int, test: str = "--fallback") -> None:
+    candidate, root, name = PAIRED_TESTS[test]
+    write_rows(out_csv, FIELDS, _pair, fallback_jobs(candidate, root), workers)
+    fallback_summary(out_csv, name)
 
 
 def _t_interval(diff):
@@ -219,7 +223,7 @@ def fallback_summary(path: str, arm: str = "fallback") -> None:
     out = {}
     for label, mask in groups.items():
         g = wide[mask]
-        col = arm if arm in ("first-fix", "reopen") else "gate"  # the CSV's candidate arm
+        col = "gate" if arm == "fallback" else arm  # the CSV's candidate arm (9.1's fallback is a gate's)
         d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", col)].astype(bool)
         b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
         kept = g[~d0 & ~d1]
@@ -366,22 +370,10 @@ if __name__ == "__main__":
     args = sys.argv[1:]
     if args[:1] == ["--summary"]:
         summary(args[1])
-    elif args[:1] == ["--fallback"]:
-        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
-    elif args[:1] == ["--fallback-summary"]:
-        fallback_summary(args[1])
-    elif args[:1] == ["--gate-again"]:
-        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, again=True)
-    elif args[:1] == ["--gate-again-summary"]:
-        fallback_summary(args[1], "gate")
-    elif args[:1] == ["--first-fix"]:
-        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, first_fix=True)
-    elif args[:1] == ["--first-fix-summary"]:
-        fallback_summary(args[1], "first-fix")
-    elif args[:1] == ["--reopen"]:
-        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, reopen=True)
-    elif args[:1] == ["--reopen-summary"]:
-        fallback_summary(args[1], "reopen")
+    elif args[:1] and args[0] in PAIRED_TESTS:
+        fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, args[0])
+    elif args[:1] and args[0].removesuffix("-summary") in PAIRED_TESTS:
+        fallback_summary(args[1], PAIRED_TESTS[args[0].removesuffix("-summary")][2])
     elif args[:1] == ["--reopen-realism"]:
         reopen_realism(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
     elif args[:1] == ["--reopen-realism-summary"]:
