@@ -129,6 +129,13 @@ IMPL_EQUAL_TIME_12 = {"impl/tight-dvl": 1800, "impl/tight-sbe": 2600, "impl/loos
 for label, n in IMPL_EQUAL_TIME_12.items():
     VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
 
+# the same rule with the thirteenth session's code (docs/filters.md section 7.5: timing.py A 3, idle machine; pmf-dvl
+# 0.121 s, loose-dvl 0.175 at 3000 and 0.093 at 1500, tight-dvl 0.195 at 3000 and 0.098 at 1500; pmf-sbe 0.143 s,
+# tight-sbe 0.171 at 3000 and 0.103 at 2000)
+IMPL_EQUAL_TIME_13 = {"impl/tight-dvl": 1800, "impl/tight-sbe": 2500, "impl/loose-dvl": 2000}
+for label, n in IMPL_EQUAL_TIME_13.items():
+    VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
+
 # the likelihood's width (docs/filters.md section 7): S = the sonar's data-sheet noise (filter.range_noise),
 # K = bilinear interpolation's own map error (filter.map_representation), on the recommended defaults
 ACC = {"C0": {}, "S": {"range_noise": "data-sheet"}, "K": {"map_representation": "bilinear"},
