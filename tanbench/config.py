@@ -32,9 +32,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
                               LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK,
-                              LOOSE_REOPEN_HEADING, MAP_REPRESENTATION, MULTIBEAM_PATTERN, POSITION_NOISE_GROWTH,
-                              PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION, REGULARISED_STATES, RESAMPLING,
-                              TIGHT_REGULARISATION, choices)
+                              LOOSE_REOPEN_HEADING, LOOSE_REOPEN_POSITION, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
+                              POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION,
+                              REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
@@ -474,6 +474,10 @@ class FilterSpec(_Strict):
         description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes keeps its own "
                     "heading, or takes the cloud's weighted mean heading (the default since docs/filters.md 14.2) "
                     "[navigation]")
+    loose_reopen_position: choices(LOOSE_REOPEN_POSITION) = new_option(
+        "prior", description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes gets "
+                             "its initial position variance back and the fix is tried again; with fix, a fix the "
+                             "reopened KF still rejects sets its position like a first fix (docs/filters.md 15) [prior]")
     recovery: choices(RECOVERY) = new_option(
         "global", neutral="estimate",
         description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "
@@ -520,6 +524,8 @@ class FilterSpec(_Strict):
         if self.loose_reopen_heading != "navigation" and not self.loose_heading_offsets:
             raise ValueError("filter.loose_reopen_heading: cloud needs filter.loose_heading_offsets: true "
                              "(set it to navigation without it)")
+        if self.loose_reopen_position != "prior" and not self.loose_heading_offsets:
+            raise ValueError("filter.loose_reopen_position: fix needs filter.loose_heading_offsets: true")
         if self.loose_first_fix != "terrain-only" and not self.loose_heading_offsets:
             raise ValueError("filter.loose_first_fix: posterior needs filter.loose_heading_offsets: true")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:

@@ -30,6 +30,8 @@ LOOSE_FIX_PRIOR_FALLBACK = ("refuse", "posterior")
 LOOSE_FIRST_FIX = ("terrain-only", "posterior")
 # the heading a loose TAN's KF keeps when it is reopened after rejected fixes (docs/filters.md 14)
 LOOSE_REOPEN_HEADING = ("navigation", "cloud")
+# what a reopened loose-TAN KF does with a fix it still rejects: nothing, or take its position (docs/filters.md 15)
+LOOSE_REOPEN_POSITION = ("prior", "fix")
 # which tight-filter states the regularisation jitters (state indices in filters/tight.py)
 REGULARISED_STATES = ("position-heading-biases", "heading-biases", "biases")
 

@@ -14,6 +14,7 @@ once without and once with the gate at 13.8, on the same data and seed. The arms
     .venv/bin/python examples/prototypes/loose_fix_gate.py --first-fix OUT.csv   # section 13's test
     .venv/bin/python examples/prototypes/loose_fix_gate.py --reopen OUT.csv      # section 14's test
     .venv/bin/python examples/prototypes/loose_fix_gate.py --reopen-realism OUT.csv  # section 14.2's
+    .venv/bin/python examples/prototypes/loose_fix_gate.py --reopen-fix OUT.csv  # section 15's
 
 ``--paired`` runs every loose-dvl run of a sweep's distinct cells with the gate on and off on the
 same vehicle data and filter seed, the seeds of each cell with the gate at 13.8 in its key (the
@@ -119,9 +120,15 @@ FIRST_FIX_ROOT = 7122026
 # section 14: a reopened KF takes the cloud's heading (filter.loose_reopen_heading: cloud), its own root seed
 REOPEN = "reopen-heading-cloud"
 REOPEN_ROOT = 8122026
+# section 15: a fix the reopened KF still rejects sets its position (filter.loose_reopen_position: fix), against
+# today's defaults; its own root seeds for section 9's cells and for realism's cells (runs 0-79)
+REOPEN_FIX = "reopen-position-fix"
+REOPEN_FIX_ROOT = 9122026
+REOPEN_FIX_REALISM = (9122027, range(80))
 # candidate -> (its arm's name in the CSV, its filter settings)
 OPTION_CANDIDATES = {FIRST_FIX: ("first-fix", {"loose_first_fix": "posterior"}),
-                     REOPEN: ("reopen", {"loose_reopen_heading": "cloud"})}
+                     REOPEN: ("reopen", {"loose_reopen_heading": "cloud"}),
+                     REOPEN_FIX: ("reopen-fix", {"loose_reopen_position": "fix"})}
 
 
 def as_run_on_4_december(scenario: Scenario) -> Scenario:
@@ -131,21 +138,26 @@ def as_run_on_4_december(scenario: Scenario) -> Scenario:
     return Scenario(**{**data, "filter": {**data["filter"], "loose_reopen_heading": "navigation"}})
 
 
-def fallback_jobs(fallback: str = "posterior", root: int | None = None) -> list:
+def fallback_jobs(fallback: str = "posterior", root: int | None = None, defaults=as_run_on_4_december,
+                  realism: tuple | None = None) -> list:
     """Section 9.1's design: section 9's cells, then every distinct cell of three committed sweeps with
-    their own seeds (the defaults' keys), each run at the defaults and with the gate and its ``fallback``
-    (section 12: ``refuse``, section 9's cells under ``root``)."""
-    jobs = [(name, as_run_on_4_december(sc), root if root is not None and not name.startswith("Monterey") else cell_root,
+    their own seeds (the defaults' keys), each run at the ``defaults`` and with the gate and its ``fallback``
+    (section 12: ``refuse``, section 9's cells under ``root``). ``realism`` = (root seed, runs): realism's cells
+    run under that seed and those runs instead of their own seed's first 20 (section 15)."""
+    jobs = [(name, defaults(sc), root if root is not None and not name.startswith("Monterey") else cell_root,
              r, fallback) for name, (sc, cell_root, runs) in cells().items() for r in range(runs)]
     for label, (path, runs) in FALLBACK_SWEEPS.items():
         sweep = load_sweep(path)
+        sweep_root, run_range = sweep.spec.seed, range(runs)
+        if label == "realism" and realism is not None:
+            sweep_root, run_range = realism
         seen = set()
         for cell in sweep.cells:
             if cell.cell_id in seen:
                 continue
             seen.add(cell.cell_id)
-            sc = as_run_on_4_december(cell.scenario)
-            jobs += [(f"{label}:{sc.cell_key()[:8]}", sc, sweep.spec.seed, r, fallback) for r in range(runs)]
+            sc = defaults(cell.scenario)
+            jobs += [(f"{label}:{sc.cell_key()[:8]}", sc, sweep_root, r, fallback) for r in run_range]
     return jobs
 
 
@@ -191,12 +203,19 @@ def reopen_realism_summary(path: str) -> None:
 # the paired tests of sections 9.1, 12, 13 and 14.1: command-line flag -> (the candidate as _pair reads it, the root
 # seed of section 9's cells (None: section 9's own), the candidate's name in the printout)
 PAIRED_TESTS = {"--fallback": ("posterior", None, "fallback"), "--gate-again": ("refuse", GATE_AGAIN_ROOT, "gate"),
-                "--first-fix": (FIRST_FIX, FIRST_FIX_ROOT, "first-fix"), "--reopen": (REOPEN, REOPEN_ROOT, "reopen")}
+                "--first-fix": (FIRST_FIX, FIRST_FIX_ROOT, "first-fix"), "--reopen": (REOPEN, REOPEN_ROOT, "reopen"),
+                "--reopen-fix": (REOPEN_FIX, REOPEN_FIX_ROOT, "reopen-fix")}
+# the tests run against today's defaults (the others: as_run_on_4_december) and with realism's own root and runs
+AGAINST_TODAY = {"--reopen-fix": REOPEN_FIX_REALISM}
 
 
 def fallback_ablation(out_csv: str, workers: int, test: str = "--fallback") -> None:
     candidate, root, name = PAIRED_TESTS[test]
-    write_rows(out_csv, FIELDS, _pair, fallback_jobs(candidate, root), workers)
+    if test in AGAINST_TODAY:
+        jobs = fallback_jobs(candidate, root, defaults=lambda sc: sc, realism=AGAINST_TODAY[test])
+    else:
+        jobs = fallback_jobs(candidate, root)
+    write_rows(out_csv, FIELDS, _pair, jobs, workers)
     fallback_summary(out_csv, name)
 
 

@@ -40,6 +40,11 @@ whose mean d^2 / v over the beams is below (divergence_sigma / 2)^2. One wild ra
 (``filter.loose_fix_fit_one_wild_beam``, the default since docs/filters.md 11.3) such an update leaves
 the count as it is (:func:`fit_without_worst_beam` judges the one wild beam), without it the count
 restarts (docs/filters.md 11).
+A KF reopened after ``kf.misses`` rejected fixes in a row (``reopen_kf``: its initial position variance back) may
+take the cloud's heading (``reopen_cloud``, ``filter.loose_reopen_heading: cloud``, docs/filters.md 14); with
+``reopen_reset`` (``filter.loose_reopen_position: fix``, docs/filters.md 15) a fix the reopened KF still rejects
+sets its position as a first fix does: a position error beyond a few of the initial standard deviations cannot
+otherwise be corrected by any later fix.
 Everything else (fix interval, chi-square gate, floor, reopening a locked-out KF,
 divergence, keep-on-map) is the built-in loop's.
 """
@@ -80,9 +85,10 @@ TurnedTrack = namedtuple("TurnedTrack", "inc yaw pitch roll up beams ranges")
 # that fails it by one beam only, or has no bottom lock, leaves the count as it is (filter.loose_fix_fit_one_wild_beam),
 # and whether the first fix after a (re)initialisation resets the KF's position to the cloud's posterior (mean and
 # covariance) instead of the terrain-only fix (filter.loose_first_fix), and whether a KF reopened after rejected fixes
-# takes the cloud's mean heading (filter.loose_reopen_heading)
+# takes the cloud's mean heading (filter.loose_reopen_heading), and whether a fix the reopened KF still rejects sets
+# its position as a first fix does (filter.loose_reopen_position)
 Gates = namedtuple("Gates", "bias_limit shape_min dt prior_gate prior_fallback fit_test fit_neutral first_posterior "
-                            "reopen_cloud", defaults=(np.inf, False, True, False, False, False))
+                            "reopen_cloud reopen_reset", defaults=(np.inf, False, True, False, False, False, False))
 # a one-particle cloud, its beam, work arrays, distance rows and log-likelihood (fit_without_worst_beam)
 OneParticle = namedtuple("OneParticle", "x vec work dist ll")
 CHI2_2_95 = 5.991464547107979  # chi^2 with 2 degrees of freedom, 95 % quantile
@@ -250,7 +256,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, beams, ranges = track
     model, rs, div, half_side, lik, guard, kf = settings
     out_en, _, _, _, _, _, reinit_out, fixed_out, rejected_out, _ = out  # the rest: record_kalman_update
-    bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral, first_posterior, reopen_cloud = gates
+    (bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral, first_posterior, reopen_cloud,
+     reopen_reset) = gates
     sig_pos = model.sig_pos
     converged_std = model.converged_std
     m = x.shape[1]
@@ -380,6 +387,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                 else:
                     copy_matrix(p_save, p_kf)
                     chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
+                    reset = False
                     if not chi2 < kf.gate:
                         rejections += 1
                         if rejections >= kf.misses:
@@ -388,10 +396,19 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                                 nav[YAW, 0] += cloud_heading_offset(x[YAW], w, nav[YAW, 0])
                             copy_matrix(p_save, p_kf)
                             chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
+                            # reopened and still refusing the converged cloud's fix: the KF's position is the lost
+                            # part (its initial variance cannot reach the fix), so the fix sets it, as a first fix does
+                            reset = reopen_reset and not chi2 < kf.gate
                     if chi2 < kf.gate and abs(nav[BZ, 0] + dx[EB]) > bias_limit:
                         copy_matrix(p_kf, p_save)  # the fix would make the gyro bias implausible
                         chi2 = np.inf
-                    if chi2 < kf.gate:
+                    if reset:
+                        position_reset(p_kf, r)
+                        nav[E, 0] = zt[0]
+                        nav[N, 0] = zt[1]
+                        rejections = 0
+                        fixed_out[k] = 1
+                    elif chi2 < kf.gate:
                         rejections = 0
                         nav[E, 0] += dx[EE]
                         nav[N, 0] += dx[EN]

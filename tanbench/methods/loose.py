@@ -124,7 +124,7 @@ def _run_turned(ctx, rng, x, inc, settings, p_kf, out):
                   float(f.loose_fix_prior_gate) if f.loose_fix_prior_gate is not None else np.inf,
                   f.loose_fix_prior_fallback == "posterior", bool(f.loose_fix_fit_test),
                   bool(f.loose_fix_fit_one_wild_beam), f.loose_first_fix == "posterior",
-                  f.loose_reopen_heading == "cloud")
+                  f.loose_reopen_heading == "cloud", f.loose_reopen_position == "fix")
     track = TurnedTrack(inc, nav.yaw[upd], nav.pitch[upd], nav.roll[upd], nav.pos[upd, 2],
                         np.ascontiguousarray(obs.dvl_beams), np.ascontiguousarray(obs.dvl_ranges[ctx.updates.rows]))
     loose_turned_loop(x8, rng, track, likelihood_grid(f, ctx.nmap), settings, gates, p_kf, out)
