@@ -475,9 +475,10 @@ class FilterSpec(_Strict):
                     "heading, or takes the cloud's weighted mean heading (the default since docs/filters.md 14.2) "
                     "[navigation]")
     loose_reopen_position: choices(LOOSE_REOPEN_POSITION) = new_option(
-        "prior", description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes gets "
-                             "its initial position variance back and the fix is tried again; with fix, a fix the "
-                             "reopened KF still rejects sets its position like a first fix (docs/filters.md 15) [prior]")
+        "fix", neutral="prior",
+        description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes gets its initial "
+                    "position variance back and the fix is tried again; with fix (the default since docs/filters.md "
+                    "15.1), a fix the reopened KF still rejects sets its position like a first fix [prior]")
     recovery: choices(RECOVERY) = new_option(
         "global", neutral="estimate",
         description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "
@@ -525,7 +526,8 @@ class FilterSpec(_Strict):
             raise ValueError("filter.loose_reopen_heading: cloud needs filter.loose_heading_offsets: true "
                              "(set it to navigation without it)")
         if self.loose_reopen_position != "prior" and not self.loose_heading_offsets:
-            raise ValueError("filter.loose_reopen_position: fix needs filter.loose_heading_offsets: true")
+            raise ValueError("filter.loose_reopen_position: fix needs filter.loose_heading_offsets: true "
+                             "(set it to prior without it)")
         if self.loose_first_fix != "terrain-only" and not self.loose_heading_offsets:
             raise ValueError("filter.loose_first_fix: posterior needs filter.loose_heading_offsets: true")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:

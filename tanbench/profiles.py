@@ -50,6 +50,7 @@ PROFILES: dict[str, dict[str, tuple[object, str]]] = {
         "filter.loose_fix_fit_one_wild_beam": (False, "the paper gates no fix"),
         "filter.loose_first_fix": ("terrain-only", "the paper's loose TAN has no KF reset"),
         "filter.loose_reopen_heading": ("navigation", "the paper's loose TAN has no KF reopening"),
+        "filter.loose_reopen_position": ("prior", "the paper's loose TAN has no KF reopening"),
         "filter.loose_fix_floor_m": (5.0, "tanbench's earlier fix floor (fix-only architecture: unused)"),
         "filter.tight_regularisation": ("shared", "Algorithm 1 and Section 3.3 describe no jitter (regularisation "
                                                   "none above)"),

@@ -24,10 +24,10 @@ runs: 8
 methods: [tight-dvl]
 # the plain likelihood, where filter.measurement_noise_altitude_m is the whole beam variance (the
 # recommended map-aware one adds the map's representation and node errors to it)
-# (loose_reopen_heading: navigation keeps the cell keys, and so the seeds, this test was written with: the default
-# since docs/filters.md 14.2 is a loose-dvl option, but every cell key holds it)
+# (loose_reopen_heading: navigation and loose_reopen_position: prior keep the cell keys, and so the seeds, this test
+# was written with: the defaults since docs/filters.md 14.2 and 15.1 are loose-dvl options, but every cell key holds them)
 scenario: {particles: 2000, duration_s: 300, filter: {map_aware_likelihood: false, likelihood: gaussian,
-                                                      loose_reopen_heading: navigation}}
+                                                      loose_reopen_heading: navigation, loose_reopen_position: prior}}
 tables:
   noise_model: {filter.measurement_noise_altitude_m: [1.0, 0.05]}
 """

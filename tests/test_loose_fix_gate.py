@@ -34,7 +34,7 @@ def test_the_diagnosed_run_is_lost_by_its_fixes_and_kept_by_the_gate():
     sc = Scenario(**{**quick.model_dump(mode="json"),
                      "filter": {**quick.model_dump(mode="json")["filter"], "loose_fix_prior_gate": None,
                                 "recovery": "estimate", "loose_fix_fit_one_wild_beam": False,
-                                "loose_reopen_heading": "navigation"}})
+                                "loose_reopen_heading": "navigation", "loose_reopen_position": "prior"}})
     assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 10, 2000)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
@@ -55,7 +55,8 @@ def test_the_fallback_needs_the_gate_and_keeps_the_diagnosed_run():
     assert Scenario(filter={"loose_fix_prior_fallback": "refuse"}).cell_key() == Scenario().cell_key()
     sweep = load_sweep("configs/quick.yaml")
     sc = _with_filter(sweep.cells[0].scenario, loose_fix_fit_one_wild_beam=False,  # the keys of the test's writing
-                      loose_reopen_heading="navigation")
+                      loose_reopen_heading="navigation",
+                      loose_reopen_position="prior")
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
     data = sc.model_dump(mode="json")
@@ -77,7 +78,9 @@ def _diagnosed_outlier_run():
     sweep = load_sweep("configs/realism.yaml")
     cell = next(c.scenario for c in sweep.cells if c.scenario.faults.outlier_fraction == 0.05
                 and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
-    sc = _with_filter(cell, loose_fix_fit_test=True, loose_fix_fit_one_wild_beam=False, loose_reopen_heading="navigation")
+    sc = _with_filter(cell, loose_fix_fit_test=True, loose_fix_fit_one_wild_beam=False,
+                      loose_reopen_heading="navigation",
+                      loose_reopen_position="prior")
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
     return sc, lambda s: run_method(s, "loose-dvl", vehicle,
@@ -136,11 +139,13 @@ def test_the_first_fix_from_the_posterior_is_an_option_and_keeps_section_7_4s_lo
     with pytest.raises(ValidationError, match="loose_first_fix"):
         Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
                          "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "navigation",
+                         "loose_reopen_position": "prior",
                          "loose_first_fix": "posterior"})
     root = 14140014  # configs/methods.yaml
     sc = Scenario(terrain={"kind": "synthetic", "seed": 1}, area="A", map_resolution_m=10, noise_m=1.0,
                   sampling_time_s=1, particles=2000,
-                  filter={"loose_reopen_heading": "navigation"})  # the keys of the test's writing
+                  filter={"loose_reopen_heading": "navigation",
+                          "loose_reopen_position": "prior"})  # the keys of the test's writing
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(root, sc.pairing_key(), 28))
     fseed = keyed_filter_seed(root, sc.cell_key(), get("loose-dvl").seed_id, 28)
     runs = {name: run_method(s, "loose-dvl", vehicle,
@@ -176,7 +181,8 @@ def test_the_reopened_heading_is_an_option_and_keeps_the_diagnosed_30_m_run():
         Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
                          "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "cloud"})
     sweep = load_sweep("configs/zhou2017.yaml")
-    sc = _with_filter(sweep.cells[2].scenario, loose_reopen_heading="navigation")  # the keys of the test's writing
+    sc = _with_filter(sweep.cells[2].scenario, loose_reopen_heading="navigation",
+                      loose_reopen_position="prior")  # the keys of the test's writing
     assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 30, 3000)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 3))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 3)
@@ -193,17 +199,19 @@ def test_the_reopened_position_is_an_option_and_keeps_the_diagnosed_area_a_run()
     is 37 degrees off; the reopened KF takes the cloud's heading, but its initial position variance cannot reach the
     fix, so every later fix is rejected. With ``filter.loose_reopen_position: fix`` such a fix sets the position and
     the run ends within metres, on the same vehicle data and filter seed."""
-    assert Scenario().filter.loose_reopen_position == "prior"
-    assert "loose_reopen_position" not in str(Scenario().identity())  # prior is neutral: the keys from before it
-    assert Scenario(filter={"loose_reopen_position": "fix"}).cell_key() != Scenario().cell_key()
+    assert Scenario().filter.loose_reopen_position == "fix"  # the default since 15.1
+    # prior is neutral: the keys from before the option
+    assert "loose_reopen_position" not in str(Scenario(filter={"loose_reopen_position": "prior"}).identity())
+    assert Scenario(filter={"loose_reopen_position": "prior"}).cell_key() != Scenario().cell_key()
     with pytest.raises(ValidationError, match="loose_reopen_position"):
         Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
                          "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "navigation",
+                         "loose_reopen_position": "prior",
                          "loose_reopen_position": "fix"})
     root, area = 14140014, {"terrain": {"kind": "synthetic", "seed": 1}, "area": "A", "map_resolution_m": 10,
                             "noise_m": 1.0, "sampling_time_s": 1, "particles": 3000}
     vehicle = simulate_vehicle(Scenario(**area), keyed_vehicle_seed(root, Scenario(**area).pairing_key(), 8))
-    sc = Scenario(**{**area, "particles": 2000})
+    sc = Scenario(**{**area, "particles": 2000, "filter": {"loose_reopen_position": "prior"}})  # its writing's keys
     fseed = keyed_filter_seed(root, sc.cell_key(), get("loose-dvl").seed_id, 8)
     runs = {name: run_method(s, "loose-dvl", vehicle,
                              np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics

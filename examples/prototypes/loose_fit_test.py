@@ -48,11 +48,12 @@ FIELDS = ["group", "cell", "run", "arm", "diverged", "final_horizontal_error_m",
 
 def as_tested(scenario: Scenario) -> Scenario:
     """The defaults as they were when both candidates were tested: ``loose_fix_fit_one_wild_beam`` off (its
-    neutral value; the default since section 11.3) and ``loose_reopen_heading: navigation`` (section 14.2), so the
-    pairs keep their keys and seeds."""
+    neutral value; the default since section 11.3), ``loose_reopen_heading: navigation`` (section 14.2) and
+    ``loose_reopen_position: prior`` (section 15.1), so the pairs keep their keys and seeds."""
     data = scenario.model_dump(mode="json")
     data["filter"]["loose_fix_fit_one_wild_beam"] = False
     data["filter"]["loose_reopen_heading"] = "navigation"  # neutral; the default since section 14.2
+    data["filter"]["loose_reopen_position"] = "prior"  # neutral; the default since section 15.1
     return Scenario(**data)
 
 

@@ -133,9 +133,18 @@ OPTION_CANDIDATES = {FIRST_FIX: ("first-fix", {"loose_first_fix": "posterior"}),
 
 def as_run_on_4_december(scenario: Scenario) -> Scenario:
     """The defaults sections 12-14 ran against: ``loose_reopen_heading: navigation`` (its neutral value; the default
-    since section 14.2), so the pairs keep their keys and seeds."""
+    since section 14.2) and ``loose_reopen_position: prior`` (neutral; the default since section 15.1), so the pairs
+    keep their keys and seeds."""
     data = scenario.model_dump(mode="json")
-    return Scenario(**{**data, "filter": {**data["filter"], "loose_reopen_heading": "navigation"}})
+    return Scenario(**{**data, "filter": {**data["filter"], "loose_reopen_heading": "navigation",
+                                          "loose_reopen_position": "prior"}})
+
+
+def as_run_for_section_15(scenario: Scenario) -> Scenario:
+    """The defaults section 15 ran against (4 December, 18:00 UTC): ``loose_reopen_position: prior`` (neutral; the
+    default since section 15.1), so its pairs keep their keys and seeds."""
+    data = scenario.model_dump(mode="json")
+    return Scenario(**{**data, "filter": {**data["filter"], "loose_reopen_position": "prior"}})
 
 
 def fallback_jobs(fallback: str = "posterior", root: int | None = None, defaults=as_run_on_4_december,
@@ -205,14 +214,15 @@ def reopen_realism_summary(path: str) -> None:
 PAIRED_TESTS = {"--fallback": ("posterior", None, "fallback"), "--gate-again": ("refuse", GATE_AGAIN_ROOT, "gate"),
                 "--first-fix": (FIRST_FIX, FIRST_FIX_ROOT, "first-fix"), "--reopen": (REOPEN, REOPEN_ROOT, "reopen"),
                 "--reopen-fix": (REOPEN_FIX, REOPEN_FIX_ROOT, "reopen-fix")}
-# the tests run against today's defaults (the others: as_run_on_4_december) and with realism's own root and runs
-AGAINST_TODAY = {"--reopen-fix": REOPEN_FIX_REALISM}
+# the tests run against the defaults of their day (the others: as_run_on_4_december), with realism's own root and runs
+AGAINST_TODAY = {"--reopen-fix": (as_run_for_section_15, REOPEN_FIX_REALISM)}
 
 
 def fallback_ablation(out_csv: str, workers: int, test: str = "--fallback") -> None:
     candidate, root, name = PAIRED_TESTS[test]
     if test in AGAINST_TODAY:
-        jobs = fallback_jobs(candidate, root, defaults=lambda sc: sc, realism=AGAINST_TODAY[test])
+        defaults, realism = AGAINST_TODAY[test]
+        jobs = fallback_jobs(candidate, root, defaults=defaults, realism=realism)
     else:
         jobs = fallback_jobs(candidate, root)
     write_rows(out_csv, FIELDS, _pair, jobs, workers)
