@@ -135,6 +135,11 @@ for label, n in IMPL_EQUAL_TIME_12.items():
 IMPL_EQUAL_TIME_13 = {"impl/tight-dvl": 1800, "impl/tight-sbe": 2500, "impl/loose-dvl": 2000}
 for label, n in IMPL_EQUAL_TIME_13.items():
     VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
+# section 7.6 (loose-dvl with section 15.2's default; timing.py A 3 at 18:46 UTC: pmf-dvl 0.137 s, loose-dvl 0.194 at
+# 3000 and 0.096 at 1500)
+IMPL_EQUAL_TIME_13_LOOSE = {"impl/loose-dvl": 2100}
+for label, n in IMPL_EQUAL_TIME_13_LOOSE.items():
+    VARIANTS[f"{label}@{n}"] = {**VARIANTS[label], "scenario": {"particles": n}}
 
 # the likelihood's width (docs/filters.md section 7): S = the sonar's data-sheet noise (filter.range_noise),
 # K = bilinear interpolation's own map error (filter.map_representation), on the recommended defaults
