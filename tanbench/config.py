@@ -478,7 +478,7 @@ class FilterSpec(_Strict):
         "fix", neutral="prior",
         description="loose TAN with heading offsets: a KF reopened after loose_fix_misses rejected fixes gets its initial "
                     "position variance back and the fix is tried again; with fix (the default since docs/filters.md "
-                    "15.1), a fix the reopened KF still rejects sets its position like a first fix [prior]")
+                    "15.2), a fix the reopened KF still rejects sets its position like a first fix [prior]")
     recovery: choices(RECOVERY) = new_option(
         "global", neutral="estimate",
         description="tight PFs: re-draw a diverged cloud around its own estimate, around the last healthy estimate "

@@ -209,7 +209,7 @@ def reopen_realism_summary(path: str) -> None:
     print(f"(a) upper end <= +1.0 m: {'holds' if hi <= 1.0 else 'fails'}; (b) c <= b: {'holds' if c <= b else 'fails'}")
 
 
-# the paired tests of sections 9.1, 12, 13 and 14.1: command-line flag -> (the candidate as _pair reads it, the root
+# the paired tests of sections 9.1, 12, 13, 14.1 and 15: command-line flag -> (the candidate as _pair reads it, the root
 # seed of section 9's cells (None: section 9's own), the candidate's name in the printout)
 PAIRED_TESTS = {"--fallback": ("posterior", None, "fallback"), "--gate-again": ("refuse", GATE_AGAIN_ROOT, "gate"),
                 "--first-fix": (FIRST_FIX, FIRST_FIX_ROOT, "first-fix"), "--reopen": (REOPEN, REOPEN_ROOT, "reopen"),
