@@ -26,6 +26,9 @@ methods: [tight-dvl]
 # recommended map-aware one adds the map's representation and node errors to it)
 # (loose_reopen_heading: navigation and loose_reopen_position: prior keep the cell keys, and so the seeds, this test
 # was written with: the defaults since docs/filters.md 14.2 and 15.1 are loose-dvl options, but every cell key holds them)
+# (measured 4 December 2026, thirteenth session: on these keys the 1 m cell stays consistent at 40 runs, ANEES 2.27
+# inside the band's 1.43-2.67; on today's default keys it is consistent at 8 runs and over-confident at 40, ANEES 4.08:
+# this cell's verdict moves with the seeds, so the test checks the rule on the pinned realisation, not the filter)
 scenario: {particles: 2000, duration_s: 300, filter: {map_aware_likelihood: false, likelihood: gaussian,
                                                       loose_reopen_heading: navigation, loose_reopen_position: prior}}
 tables:
