@@ -155,5 +155,6 @@ def execute(task: Task) -> TaskResult:
         rows.append({**row, **result.metrics, "status": "ok", "error": "",
                      "wall_s": time.perf_counter() - t0 + sim_wall / len(task.methods)})
         if task.keep_series:
-            series[method] = {k: np.asarray(result.series[k], dtype=np.float32) for k in SERIES_COLUMNS}
+            with np.errstate(over="ignore"):  # beyond float32's range (a lost run's NEES): stored as inf, no warning
+                series[method] = {k: np.asarray(result.series[k], dtype=np.float32) for k in SERIES_COLUMNS}
     return TaskResult(cell_id=task.cell_id, run=task.run, rows=rows, series=series, code=code)
