@@ -170,10 +170,13 @@ def loose_filter_loop(x, rng, track, offsets, grid, settings, out):
 
 
 @nb.njit(cache=True)
-def position_reset(p_kf, r):
-    """The first fix after a (re)initialisation sets the position: P_pp = R, the position's
-    correlations with heading and bias dropped (a single fix cannot tell an initial
-    position error from a heading error; heading is learnt from the fixes that follow)."""
+def position_reset(p_kf, r, nav, zt):
+    """The first fix after a (re)initialisation sets the position: the navigation's east and north
+    (``nav[E, 0]``, ``nav[N, 0]``) become the fix ``zt``, P_pp = R, the position's correlations with
+    heading and bias dropped (a single fix cannot tell an initial position error from a heading
+    error; heading is learnt from the fixes that follow)."""
+    nav[E, 0] = zt[0]
+    nav[N, 0] = zt[1]
     for i in range(N_ERROR):
         p_kf[EE, i] = p_kf[i, EE] = 0.0
         p_kf[EN, i] = p_kf[i, EN] = 0.0
@@ -338,9 +341,7 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
                 if first_fix:  # position reset: one fix cannot tell an initial position error from heading
-                    position_reset(p_kf, r)
-                    nav[E, 0] = zt[0]
-                    nav[N, 0] = zt[1]
+                    position_reset(p_kf, r, nav, zt)
                     first_fix = False
                     fixed_out[k] = 1
                 else:

@@ -379,9 +379,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
                 if first_fix:
-                    position_reset(p_kf, r)
-                    nav[E, 0] = zt[0]
-                    nav[N, 0] = zt[1]
+                    position_reset(p_kf, r, nav, zt)
                     first_fix = False
                     fixed_out[k] = 1
                 else:
@@ -403,9 +401,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                         copy_matrix(p_kf, p_save)  # the fix would make the gyro bias implausible
                         chi2 = np.inf
                     if reset:
-                        position_reset(p_kf, r)
-                        nav[E, 0] = zt[0]
-                        nav[N, 0] = zt[1]
+                        position_reset(p_kf, r, nav, zt)
                         rejections = 0
                         fixed_out[k] = 1
                     elif chi2 < kf.gate:

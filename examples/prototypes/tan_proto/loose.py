@@ -265,8 +265,7 @@ def run_loose(ctx) -> MethodOutput:
                 r[0, 0] += kf.r_floor * kf.r_floor
                 r[1, 1] += kf.r_floor * kf.r_floor
                 if first_fix:
-                    position_reset(p_kf, r)
-                    navp[E, 0], navp[N, 0] = zt[0], zt[1]
+                    position_reset(p_kf, r, navp, zt)
                     first_fix = False
                     fixed_out[k] = 1
                 else:
