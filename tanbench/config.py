@@ -61,6 +61,16 @@ def new_option(default, *, neutral=_SAME, **field_kwargs):
     return Field(default, json_schema_extra=extra, **field_kwargs)
 
 
+# the loose TAN's options that act only in its loop with heading offsets (filters/loose_turned.py): a value other
+# than the neutral one needs filter.loose_heading_offsets (checked in this order)
+TURNED_LOOP_ONLY = ("loose_fix_fit_one_wild_beam", "loose_reopen_heading", "loose_reopen_position", "loose_first_fix")
+
+
+def _yaml_word(value) -> str:
+    """An option's value as a sweep file spells it (true, false, cloud)."""
+    return str(value).lower() if isinstance(value, bool) else str(value)
+
+
 def _is_numeric(annotation) -> bool:
     """Whether a field takes numbers (int or float, alone, in a union or in a tuple) and no booleans."""
     kinds = set()
@@ -519,17 +529,11 @@ class FilterSpec(_Strict):
                              "filter.loose_heading_offsets: true (set them to null without it)")
         if not self.loose_heading_offsets and not self.loose_fix_fit_test:
             raise ValueError("filter.loose_fix_fit_test: false needs filter.loose_heading_offsets: true")
-        if self.loose_fix_fit_one_wild_beam and not self.loose_heading_offsets:
-            raise ValueError("filter.loose_fix_fit_one_wild_beam: true needs filter.loose_heading_offsets: true "
-                             "(set it to false without it)")
-        if self.loose_reopen_heading != "navigation" and not self.loose_heading_offsets:
-            raise ValueError("filter.loose_reopen_heading: cloud needs filter.loose_heading_offsets: true "
-                             "(set it to navigation without it)")
-        if self.loose_reopen_position != "prior" and not self.loose_heading_offsets:
-            raise ValueError("filter.loose_reopen_position: fix needs filter.loose_heading_offsets: true "
-                             "(set it to prior without it)")
-        if self.loose_first_fix != "terrain-only" and not self.loose_heading_offsets:
-            raise ValueError("filter.loose_first_fix: posterior needs filter.loose_heading_offsets: true")
+        for name in () if self.loose_heading_offsets else TURNED_LOOP_ONLY:
+            value, neutral = getattr(self, name), type(self).model_fields[name].json_schema_extra["key_neutral"]
+            if value != neutral:
+                raise ValueError(f"filter.{name}: {_yaml_word(value)} needs filter.loose_heading_offsets: true "
+                                 f"(set it to {_yaml_word(neutral)} without it)")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:
             raise ValueError("filter.loose_fix_prior_fallback: posterior needs filter.loose_fix_prior_gate "
                              "(the fixes it replaces are the ones that gate refuses)")
