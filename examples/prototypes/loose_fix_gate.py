@@ -32,6 +32,7 @@ import inspect
 import math
 import sys
 import textwrap
+from collections import namedtuple
 from multiprocessing import Pool
 
 import numpy as np
@@ -131,20 +132,36 @@ OPTION_CANDIDATES = {FIRST_FIX: ("first-fix", {"loose_first_fix": "posterior"}),
                      REOPEN_FIX: ("reopen-fix", {"loose_reopen_position": "fix"})}
 
 
+def _pinned(scenario: Scenario, **options) -> Scenario:
+    data = scenario.model_dump(mode="json")
+    return Scenario(**{**data, "filter": {**data["filter"], **options}})
+
+
 def as_run_on_4_december(scenario: Scenario) -> Scenario:
     """The defaults sections 12-14 ran against: ``loose_reopen_heading: navigation`` (its neutral value; the default
-    since section 14.2) and ``loose_reopen_position: prior`` (neutral; the default since section 15.1), so the pairs
+    since section 14.2) and ``loose_reopen_position: prior`` (neutral; the default since section 15.2), so the pairs
     keep their keys and seeds."""
-    data = scenario.model_dump(mode="json")
-    return Scenario(**{**data, "filter": {**data["filter"], "loose_reopen_heading": "navigation",
-                                          "loose_reopen_position": "prior"}})
+    return _pinned(scenario, loose_reopen_heading="navigation", loose_reopen_position="prior")
 
 
 def as_run_for_section_15(scenario: Scenario) -> Scenario:
     """The defaults section 15 ran against (4 December, 18:00 UTC): ``loose_reopen_position: prior`` (neutral; the
-    default since section 15.1), so its pairs keep their keys and seeds."""
-    data = scenario.model_dump(mode="json")
-    return Scenario(**{**data, "filter": {**data["filter"], "loose_reopen_position": "prior"}})
+    default since section 15.2), so its pairs keep their keys and seeds."""
+    return _pinned(scenario, loose_reopen_position="prior")
+
+
+def sweep_jobs(label: str, path: str, root: int | None, runs, defaults, fallback: str) -> list:
+    """Every distinct cell of the sweep ``path`` at the ``defaults``, runs ``runs`` under ``root`` (None: the sweep's
+    own seed), named ``label:`` and the cell key's head."""
+    sweep = load_sweep(path)
+    root = sweep.spec.seed if root is None else root
+    seen, jobs = set(), []
+    for cell in sweep.cells:
+        if cell.cell_id not in seen:
+            seen.add(cell.cell_id)
+            sc = defaults(cell.scenario)
+            jobs += [(f"{label}:{sc.cell_key()[:8]}", sc, root, r, fallback) for r in runs]
+    return jobs
 
 
 def fallback_jobs(fallback: str = "posterior", root: int | None = None, defaults=as_run_on_4_december,
@@ -156,17 +173,8 @@ def fallback_jobs(fallback: str = "posterior", root: int | None = None, defaults
     jobs = [(name, defaults(sc), root if root is not None and not name.startswith("Monterey") else cell_root,
              r, fallback) for name, (sc, cell_root, runs) in cells().items() for r in range(runs)]
     for label, (path, runs) in FALLBACK_SWEEPS.items():
-        sweep = load_sweep(path)
-        sweep_root, run_range = sweep.spec.seed, range(runs)
-        if label == "realism" and realism is not None:
-            sweep_root, run_range = realism
-        seen = set()
-        for cell in sweep.cells:
-            if cell.cell_id in seen:
-                continue
-            seen.add(cell.cell_id)
-            sc = defaults(cell.scenario)
-            jobs += [(f"{label}:{sc.cell_key()[:8]}", sc, sweep_root, r, fallback) for r in run_range]
+        sweep_root, run_range = realism if label == "realism" and realism is not None else (None, range(runs))
+        jobs += sweep_jobs(label, path, sweep_root, run_range, defaults, fallback)
     return jobs
 
 
@@ -175,14 +183,7 @@ REALISM_MORE = range(20, 100)
 
 
 def reopen_realism_jobs() -> list:
-    sweep = load_sweep(FALLBACK_SWEEPS["realism"][0])
-    seen, jobs = set(), []
-    for cell in sweep.cells:
-        if cell.cell_id not in seen:
-            seen.add(cell.cell_id)
-            sc = as_run_on_4_december(cell.scenario)
-            jobs += [(f"realism:{sc.cell_key()[:8]}", sc, sweep.spec.seed, r, REOPEN) for r in REALISM_MORE]
-    return jobs
+    return sweep_jobs("realism", FALLBACK_SWEEPS["realism"][0], None, REALISM_MORE, as_run_on_4_december, REOPEN)
 
 
 def reopen_realism(out_csv: str, workers: int) -> None:
@@ -209,24 +210,23 @@ def reopen_realism_summary(path: str) -> None:
     print(f"(a) upper end <= +1.0 m: {'holds' if hi <= 1.0 else 'fails'}; (b) c <= b: {'holds' if c <= b else 'fails'}")
 
 
-# the paired tests of sections 9.1, 12, 13, 14.1 and 15: command-line flag -> (the candidate as _pair reads it, the root
-# seed of section 9's cells (None: section 9's own), the candidate's name in the printout)
-PAIRED_TESTS = {"--fallback": ("posterior", None, "fallback"), "--gate-again": ("refuse", GATE_AGAIN_ROOT, "gate"),
-                "--first-fix": (FIRST_FIX, FIRST_FIX_ROOT, "first-fix"), "--reopen": (REOPEN, REOPEN_ROOT, "reopen"),
-                "--reopen-fix": (REOPEN_FIX, REOPEN_FIX_ROOT, "reopen-fix")}
-# the tests run against the defaults of their day (the others: as_run_on_4_december), with realism's own root and runs
-AGAINST_TODAY = {"--reopen-fix": (as_run_for_section_15, REOPEN_FIX_REALISM)}
+# the paired tests of sections 9.1, 12, 13, 14.1 and 15: command-line flag -> the candidate as _pair reads it, the
+# root seed of section 9's cells (None: section 9's own), the candidate's name in the printout, the defaults it ran
+# against and realism's (root seed, runs) when not its own seed's first 20
+PairedTest = namedtuple("PairedTest", "candidate root name defaults realism",
+                        defaults=(as_run_on_4_december, None))
+PAIRED_TESTS = {"--fallback": PairedTest("posterior", None, "fallback"),
+                "--gate-again": PairedTest("refuse", GATE_AGAIN_ROOT, "gate"),
+                "--first-fix": PairedTest(FIRST_FIX, FIRST_FIX_ROOT, "first-fix"),
+                "--reopen": PairedTest(REOPEN, REOPEN_ROOT, "reopen"),
+                "--reopen-fix": PairedTest(REOPEN_FIX, REOPEN_FIX_ROOT, "reopen-fix", as_run_for_section_15,
+                                           REOPEN_FIX_REALISM)}
 
 
 def fallback_ablation(out_csv: str, workers: int, test: str = "--fallback") -> None:
-    candidate, root, name = PAIRED_TESTS[test]
-    if test in AGAINST_TODAY:
-        defaults, realism = AGAINST_TODAY[test]
-        jobs = fallback_jobs(candidate, root, defaults=defaults, realism=realism)
-    else:
-        jobs = fallback_jobs(candidate, root)
-    write_rows(out_csv, FIELDS, _pair, jobs, workers)
-    fallback_summary(out_csv, name)
+    t = PAIRED_TESTS[test]
+    write_rows(out_csv, FIELDS, _pair, fallback_jobs(t.candidate, t.root, t.defaults, t.realism), workers)
+    fallback_summary(out_csv, t.name)
 
 
 def _t_interval(diff):
@@ -402,7 +402,7 @@ if __name__ == "__main__":
     elif args[:1] and args[0] in PAIRED_TESTS:
         fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, args[0])
     elif args[:1] and args[0].removesuffix("-summary") in PAIRED_TESTS:
-        fallback_summary(args[1], PAIRED_TESTS[args[0].removesuffix("-summary")][2])
+        fallback_summary(args[1], PAIRED_TESTS[args[0].removesuffix("-summary")].name)
     elif args[:1] == ["--reopen-realism"]:
         reopen_realism(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
     elif args[:1] == ["--reopen-realism-summary"]:
