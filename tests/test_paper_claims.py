@@ -36,9 +36,9 @@ NOT_REPRODUCED = {
     "recommended": {
         # measured on the committed 50-run results/zhou2017 (recommended settings: issue 24's defaults with
         # filter.recovery: global, filter.loose_fix_fit_one_wild_beam: true, filter.loose_reopen_heading: cloud and
-        # filter.loose_reopen_position: fix, regenerated 4 December 2026: new seeds for every cell); p values of the counted one-sided test (Wilcoxon signed-rank or Mann-Whitney U, at
-        # 1 %), with the permutation test of the mean (reported, not counted) where the two disagree; no run of
-        # these cells is lost unless the reason says so
+        # filter.loose_reopen_position: fix, regenerated 4 December 2026: new seeds for every cell); p values of the
+        # counted one-sided test (Wilcoxon signed-rank or Mann-Whitney U, at 1 %), with the permutation test of the
+        # mean (reported, not counted) where the two disagree; no run of these cells is lost unless the reason says so
         "1b": "tight-sbe (mean 1.1 m) is not significantly worse than tight-dvl (1.0 m): p = 0.29",
         "2b": "the MC mean |heading error| over the last 60 s in area B is 1.13 deg, not around 10 deg (5..20); "
               "tight-dvl's final heading error is larger in B than in A (1.1 against 0.6 deg, p = 0.0016)",
