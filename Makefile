@@ -6,7 +6,7 @@ TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
 PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d))) $(if $(wildcard results/zhou2017-fitted/sweep.yaml),--fitted results/zhou2017-fitted)
 
-.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism heldout-relief multibeam criterion seafloors literal-family fitted check-numpy scaling clean
+.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism heldout-relief multibeam criterion seafloors literal-family fitted check-numpy scaling compile-stages clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -182,6 +182,12 @@ scaling: $(VENV)/.installed-run
 	$(TB) run configs/quick.yaml --out results/scaling-1 --force --quiet --workers 1
 	$(TB) run configs/quick.yaml --out results/scaling-2 --force --quiet --workers 2
 	@$(BIN)/python -c "import json; w = [json.loads(open(f'results/scaling-{n}/sessions.jsonl').readlines()[-1])['wall_s'] for n in (1, 2)]; print(f'1 worker {w[0]:.1f} s, 2 workers {w[1]:.1f} s: {w[0] / w[1]:.2f}x')"
+
+## compile-stages: record which kernels the tight and loose families both compile, and split them between the two
+## side-by-side compile processes of a cold first run (tanbench/runner/compile_stages.json; docs/speed.md). Rerun
+## after a change to the kernels' arguments: tests/test_first_run.py fails on a stale table.
+compile-stages: $(VENV)/.installed-run
+	$(BIN)/python -m tanbench.runner.compile_stages
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis results/quick results/ci results/ci-numpy results/scaling-1 results/scaling-2

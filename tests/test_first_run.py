@@ -425,13 +425,21 @@ def test_the_warm_up_compiles_one_signature_per_wrapped_kernel():
 
 
 THIN_FILL_WRAPPERS = {"tanbench.filters.rng.fill_normals", "tanbench.filters.rng.fill_uniforms"}
+# kernels the tight and the loose loop call with types of their own (not shared, so not in the table): the
+# estimate's angle row is a literal (5 or -1, which prunes the circular mean from the loose loop), and the
+# loose loop hands keep_on_map a strided row of its cloud (0.2 s)
+PER_FAMILY_SIGNATURES = {"tanbench.filters.estimate.weighted_estimate", "tanbench.filters.tight.keep_on_map"}
 
 
-def test_a_cold_loose_warm_up_compiles_each_jitted_kernel_once(tmp_path):
-    """On an empty cache every kernel the loose filter reaches, jitted callees included, compiles one
-    signature: a caller passing a literal 0 or 1 where the others pass a run-time integer compiled the whole
-    likelihood pass a second time (about 5 s of the first run, found 4 December). The random-number fills'
-    two-line wrappers are allowed one signature per array rank; what they call compiles once."""
+def test_a_cold_staged_warm_up_compiles_each_jitted_kernel_once(tmp_path):
+    """On an empty cache, both shares of the compile-stages table (each process's part of the kernels the
+    tight and loose families share, tanbench.runner.compile_stages), then tight-dvl, tight-sbe and
+    loose-dvl warmed up in one process: every kernel they reach, jitted callees included, compiles one
+    signature. So the table's argument types are the ones the methods pass (a stale entry would compile a
+    second signature), and no caller passes a literal 0 or 1 where the others pass a run-time integer (that
+    compiled the whole likelihood pass a second time, about 5 s of the first run, found 4 December). The
+    random-number fills' two-line wrappers are allowed one signature per array rank; what they call
+    compiles once."""
     import json
     import os
     import subprocess
@@ -439,13 +447,19 @@ def test_a_cold_loose_warm_up_compiles_each_jitted_kernel_once(tmp_path):
 
     code = ("import gc, json\n"
             "from numba.core.registry import CPUDispatcher\n"
+            "from tanbench.runner import compile_stages\n"
             "from tanbench.runner.executors import warm_up\n"
-            "warm_up(None, ('loose-dvl',))\n"
-            "print(json.dumps({f'{d.py_func.__module__}.{d.py_func.__qualname__}': len(d.signatures)"
-            " for d in gc.get_objects() if isinstance(d, CPUDispatcher)"
-            " and d.py_func.__module__.startswith('tanbench')}))\n")
+            "table = compile_stages.load_table()['shares']\n"
+            "skipped = [compile_stages.compile_share(share)[1] for share in table.values()]\n"
+            "warm_up(None, ('tight-dvl', 'tight-sbe', 'loose-dvl'))\n"
+            "print(json.dumps({'skipped': skipped, 'counts': {f'{d.py_func.__module__}.{d.py_func.__qualname__}':"
+            " len(d.signatures) for d in gc.get_objects() if isinstance(d, CPUDispatcher)"
+            " and d.py_func.__module__.startswith('tanbench')}}))\n")
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT, env=env)
-    counts = json.loads(out.stdout.strip().splitlines()[-1])
+    found = json.loads(out.stdout.strip().splitlines()[-1])
+    counts = found["counts"]
+    assert found["skipped"] == [[], []]
     assert counts["tanbench.filters.likelihood.loglik_tight_pass"] == 1  # compiled here, not loaded
-    assert {k: n for k, n in counts.items() if n > 1 and k not in THIN_FILL_WRAPPERS} == {}
+    assert {k: n for k, n in counts.items() if n > 1 and k not in THIN_FILL_WRAPPERS | PER_FAMILY_SIGNATURES} == {}
+    assert all(counts[k] == 2 for k in PER_FAMILY_SIGNATURES)

@@ -114,7 +114,7 @@ def _fork_server_context():
     return context
 
 
-def warm_up(scenario_json: str | None = None, methods=None) -> None:
+def warm_up(scenario_json: str | None = None, methods=None, share=()) -> None:
     """Compile (or load from cache) the jitted kernels of ``methods`` with a tiny run of each.
 
     ``methods``: the sweep's method names (default: every built-in); only built-in methods
@@ -124,6 +124,8 @@ def warm_up(scenario_json: str | None = None, methods=None) -> None:
     given, instead of synthesising the default one. A sweep of three particle filters thus
     never compiles nor loads the point-mass, marginalized, EKF and TERCOM kernels. Marks each
     method's kernels warm in the cell's variant (:func:`tanbench.runner.plan.cell_kernels`).
+    ``share``: kernels compiled first, on their own (:func:`tanbench.runner.compile_stages.compile_share`:
+    this process's part of what side-by-side compile processes share).
     """
     import json
 
@@ -136,6 +138,10 @@ def warm_up(scenario_json: str | None = None, methods=None) -> None:
     from tanbench.runner.plan import cell_kernels
     from tanbench.simulation import simulate_vehicle
 
+    if share:
+        from tanbench.runner.compile_stages import compile_share
+
+        compile_share(share)
     builtin = builtin_names()
     names = builtin if methods is None else tuple(m for m in methods if m in builtin)
     spec = json.loads(scenario_json) if scenario_json else {}
@@ -156,6 +162,8 @@ def warm_up_side_by_side(scenario_json: str | None, groups, truth_maps: dict | N
     up its own, into the same on-disk cache (numba writes each file whole, then renames it); then this
     process warms up every group's methods, loading what the helpers compiled and compiling anything
     they did not store (a helper that failed, or an index entry lost to a simultaneous write).
+    Each process first compiles its share of the kernels the groups share
+    (:func:`tanbench.runner.compile_stages.shares_for`), so that each of those compiles once.
     A helper starts as a local worker does (:func:`_local_worker_init`: single threaded, given the
     truth maps, ending with this process)."""
     groups = [tuple(g) for g in groups if g]
@@ -163,15 +171,16 @@ def warm_up_side_by_side(scenario_json: str | None, groups, truth_maps: dict | N
     if len(groups) <= 1:
         warm_up(scenario_json, everything)
         return
+    shares = _shares_of(scenario_json, groups)
     maps_pickle = pickle.dumps(truth_maps or {}, protocol=pickle.HIGHEST_PROTOCOL)
     context = local_context()
     helpers = [context.Process(target=_local_worker_init, name=f"tanbench-compile-{i}", daemon=True,
-                               args=(os.getpid(), maps_pickle, b"", scenario_json, group))
+                               args=(os.getpid(), maps_pickle, b"", scenario_json, group, shares[i]))
                for i, group in enumerate(groups[1:], start=1)]
     for helper in helpers:
         helper.start()
     try:
-        warm_up(scenario_json, groups[0])
+        warm_up(scenario_json, groups[0], shares[0])
         for helper in helpers:
             helper.join()
     finally:
@@ -180,6 +189,21 @@ def warm_up_side_by_side(scenario_json: str | None, groups, truth_maps: dict | N
                 helper.terminate()
                 helper.join(STOP_JOIN_S)
     warm_up(scenario_json, everything)
+
+
+def _shares_of(scenario_json: str | None, groups) -> list[list]:
+    """:func:`tanbench.runner.compile_stages.shares_for` the cell ``scenario_json`` (none for a cell that
+    does not build: its warm-up reports it)."""
+    import json
+
+    from tanbench.config import Scenario
+    from tanbench.runner.compile_stages import shares_for
+
+    try:
+        scenario = Scenario(**json.loads(scenario_json)) if scenario_json else Scenario()
+    except Exception:  # noqa: BLE001 - a cell that cannot run reports itself in its task
+        return [[] for _ in groups]
+    return shares_for(groups, scenario)
 
 
 def install_worker_maps(maps: dict) -> None:
@@ -236,7 +260,7 @@ def die_with_parent(parent_pid: int) -> None:
 
 
 def _local_worker_init(parent_pid: int, maps_pickle: bytes, worlds_pickle: bytes = b"",
-                       scenario_json: str | None = None, methods=None) -> None:
+                       scenario_json: str | None = None, methods=None, share=()) -> None:
     die_with_parent(parent_pid)
     name_this_process(WORKER_NAME)
     for name in ("SIGINT", "SIGHUP"):  # the parent handles Ctrl-C and a closed terminal, and stops us
@@ -252,7 +276,7 @@ def _local_worker_init(parent_pid: int, maps_pickle: bytes, worlds_pickle: bytes
 
         preload_worlds(pickle.loads(worlds_pickle))
     try:
-        warm_up(scenario_json, methods)
+        warm_up(scenario_json, methods, share)
     except Exception:  # noqa: BLE001 - a cell that cannot run reports itself in its task
         warm_up(None, methods)
 
