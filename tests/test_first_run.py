@@ -139,6 +139,19 @@ def test_the_load_probe_reads_proc_stat(monkeypatch, tmp_path):
     assert planning.busy_jiffies() is None
 
 
+def test_the_load_is_the_least_any_probe_saw(monkeypatch):
+    """A burst that one probe sees and the others do not is not load: the largest share and the fewest other
+    busy cores of the probes; without /proc/stat, None for the cores."""
+    readings = iter([(0.55, 1.2), (1.0, 0.04), (0.9, 0.0)])
+    monkeypatch.setattr(planning, "cpu_load_probe", lambda probe_s: next(readings))
+    monkeypatch.setattr(planning, "LOAD_PROBE_GAP_S", 0.0)
+    assert planning.cpu_load_now() == (1.0, 0.0)
+    readings = iter([(0.5, None), (0.4, None)])
+    assert planning.cpu_load_now(probes=2) == (0.5, None)
+    readings = iter([(0.5, 1.0), (0.5, 1.0), (0.5, 1.0)])  # load that lasts
+    assert planning.cpu_load_now() == (0.5, 1.0)
+
+
 def test_side_by_side_warm_up_of_one_group_stays_in_this_process(monkeypatch):
     """One group (or one process): the warm-up runs here, once, on every method; no helper starts."""
     from tanbench.runner import executors

@@ -387,7 +387,7 @@ def busy_jiffies() -> tuple[int, int] | None:
     return busy, busy + nice + idle + iowait
 
 
-def cpu_load_now(probe_s: float = 0.25) -> tuple[float, float | None]:
+def cpu_load_probe(probe_s: float = 0.25) -> tuple[float, float | None]:
     """(the share of a core this process gets now, the cores other work keeps busy now), measured over one
     short busy loop: its thread CPU over wall time, and (Linux) the machine's busy ticks during it
     (:func:`busy_jiffies`) less the loop's own; None for the second where the system does not report it.
@@ -404,6 +404,26 @@ def cpu_load_now(probe_s: float = 0.25) -> tuple[float, float | None]:
         return share, None
     busy_cores = default_workers() * (j1[0] - j0[0]) / (j1[1] - j0[1])
     return share, max(0.0, busy_cores - share)
+
+
+LOAD_PROBES = 3
+LOAD_PROBE_GAP_S = 0.1
+
+
+def cpu_load_now(probe_s: float = 0.25, probes: int = LOAD_PROBES) -> tuple[float, float | None]:
+    """The least load of ``probes`` :func:`cpu_load_probe` loops, :data:`LOAD_PROBE_GAP_S` apart: the largest
+    share and the fewest other busy cores any of them saw. Load that lasts keeps every probe from its core; a
+    burst shorter than the probes is not load a compile of half a minute meets (one probe read 1.2 other busy
+    cores on an idle machine before a compile of 21 s: docs/speed.md, fourteenth session)."""
+    share, others = 0.0, None
+    for i in range(max(1, probes)):
+        if i:
+            time.sleep(LOAD_PROBE_GAP_S)
+        one, busy = cpu_load_probe(probe_s)
+        share = max(share, one)
+        if busy is not None:
+            others = busy if others is None else min(others, busy)
+    return share, others
 
 
 # a probe that got at least this share got a whole core: on the idle 2-core machine the probe reads
