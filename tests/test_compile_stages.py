@@ -50,10 +50,13 @@ def test_the_committed_table_resolves_to_this_codes_kernels():
 
 
 def test_a_share_skips_what_does_not_resolve():
-    """A renamed kernel or a type this numba cannot build is skipped, not an error."""
+    """A renamed kernel, a type this numba cannot build, or types the kernel does not compile for (the
+    third entry: one integer where it takes four arguments) are skipped, not an error."""
     bogus = [{"kernel": "tanbench.filters.resample.no_such_kernel", "signature": [["scalar", "int64"]]},
-             {"kernel": "tanbench.filters.resample.resample_indices", "signature": [["nonsense"]]}]
+             {"kernel": "tanbench.filters.resample.resample_indices", "signature": [["nonsense"]]},
+             {"kernel": "tanbench.filters.resample.resample_indices", "signature": [["scalar", "int64"]]}]
     assert stages.compile_share(bogus) == (0, ["tanbench.filters.resample.no_such_kernel",
+                                               "tanbench.filters.resample.resample_indices",
                                                "tanbench.filters.resample.resample_indices"])
     assert stages.compile_share([]) == (0, [])
 
