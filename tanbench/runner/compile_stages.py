@@ -29,6 +29,8 @@ import time
 from functools import lru_cache
 from pathlib import Path
 
+from tanbench.runner.plan import family_of, kernel_variant
+
 TABLE = Path(__file__).with_name("compile_stages.json")
 # the methods whose cold warm-ups are recorded, per family: configs/quick.yaml's and the default sweep's
 RECORDED = {"tight": ("tight-dvl", "tight-sbe"), "loose": ("loose-dvl",)}
@@ -104,8 +106,6 @@ def shares_for(groups, scenario=None) -> list[list]:
     in a group of its own and every built-in method of the groups runs its default kernel variant in a
     cell of ``scenario`` (:func:`tanbench.runner.plan.kernel_variant`): the table holds the default
     variant's argument types."""
-    from tanbench.runner.plan import family_of, kernel_variant
-
     table = load_table().get("shares", {})
     nothing = [[] for _ in groups]
     families = [{family_of(m) for m in g} for g in groups]
@@ -141,17 +141,16 @@ def compile_share(entries) -> tuple[int, list[str]]:
 
 # --- recording the table (make compile-stages) -------------------------------------------------------
 
-def record_group(methods) -> dict:
-    """In this process, on an empty numba cache: warm up ``methods`` and return every tanbench kernel
-    compile of it, in order: the kernel, its argument types (:func:`encode_type`), the seconds it took with
-    its callees, and its caller (None for one called from Python); and the seconds of the whole warm-up."""
+def record_compiles(warm_up) -> dict:
+    """In this process, on an empty numba cache: call ``warm_up()`` (a group's warm-up) and return every
+    tanbench kernel compile of it, in order: the kernel, its argument types (:func:`encode_type`), the seconds
+    it took with its callees, and its caller (None for one called from Python); and the seconds of the whole
+    warm-up."""
     from numba.core import event
-
-    from tanbench.runner.executors import warm_up
 
     started = time.perf_counter()
     with event.install_recorder("numba:compile") as recorder:
-        warm_up(None, methods)
+        warm_up()
     total = time.perf_counter() - started
     compiles, stack = [], []
     for stamp, ev in recorder.buffer:
@@ -169,11 +168,11 @@ def record_group(methods) -> dict:
         except TypeError:
             signature = None
         compiles.append({"kernel": name, "signature": signature, "seconds": stamp - begun, "caller": caller})
-    return {"methods": list(methods), "seconds": total, "compiles": compiles}
+    return {"seconds": total, "compiles": compiles}
 
 
 def split_shares(records: dict) -> dict:
-    """The table from each family's :func:`record_group`: the kernels every family compiles with the same
+    """The table from each family's :func:`record_compiles`: the kernels every family compiles with the same
     argument types are shared; the roots among them (no shared kernel calls them) are split, the longest
     first, each to the family whose share plus its own seconds (its warm-up less its shared roots) is then
     shortest."""
@@ -205,8 +204,9 @@ def record(path: Path = TABLE) -> dict:
     records = {}
     for family, methods in RECORDED.items():
         with tempfile.TemporaryDirectory(prefix="tanbench-stages-") as cache:
-            code = ("import json, sys\nfrom tanbench.runner.compile_stages import record_group\n"
-                    f"print(json.dumps(record_group({list(methods)!r})))\n")
+            code = ("import json\nfrom tanbench.runner.compile_stages import record_compiles\n"
+                    "from tanbench.runner.executors import warm_up\n"
+                    f"print(json.dumps(record_compiles(lambda: warm_up(None, {tuple(methods)!r}))))\n")
             out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                                  env={**os.environ, "NUMBA_CACHE_DIR": cache})
             records[family] = json.loads(out.stdout.strip().splitlines()[-1])
