@@ -94,3 +94,12 @@ def test_the_split_shares_the_roots_and_balances_the_processes():
     assert table["own_seconds"] == {"a": 18.0, "b": 9.5}
     assert shared == {"t.big": "b", "t.mid": "b", "t.small": "a"}
     assert table["expected_seconds"] == {"a": 19.5, "b": 20.5}
+
+
+def test_the_table_is_written_one_kernel_a_line_and_reads_back_equal(tmp_path):
+    table = stages.load_table()
+    path = tmp_path / "stages.json"
+    stages.write_table(table, path)
+    assert json.loads(path.read_text()) == table
+    kernels = sum(len(share) for share in table["shares"].values())
+    assert sum('"kernel":' in line for line in path.read_text().splitlines()) == kernels

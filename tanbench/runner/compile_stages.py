@@ -211,9 +211,20 @@ def record(path: Path = TABLE) -> dict:
                                  env={**os.environ, "NUMBA_CACHE_DIR": cache})
             records[family] = json.loads(out.stdout.strip().splitlines()[-1])
     table = {"numba": numba.__version__, "recorded": RECORDED, **split_shares(records)}
-    path.write_text(json.dumps(table, indent=1) + "\n")
-    load_table.cache_clear()
+    write_table(table, path)
     return table
+
+
+def write_table(table: dict, path: Path = TABLE) -> None:
+    """Write ``table`` to ``path`` as JSON with one line per kernel of a share (readable in a diff)."""
+    head = {k: v for k, v in table.items() if k != "shares"}
+    lines = ["{"] + [f" {json.dumps(k)}: {json.dumps(v)}," for k, v in head.items()] + [' "shares": {']
+    for i, (family, entries) in enumerate(table["shares"].items()):
+        lines.append(f"  {json.dumps(family)}: [")
+        lines += [f"   {json.dumps(e)}" + ("," if j < len(entries) - 1 else "") for j, e in enumerate(entries)]
+        lines.append("  ]" + ("," if i < len(table["shares"]) - 1 else ""))
+    path.write_text("\n".join(lines + [" }", "}"]) + "\n")
+    load_table.cache_clear()
 
 
 if __name__ == "__main__":
