@@ -63,7 +63,8 @@ def new_option(default, *, neutral=_SAME, **field_kwargs):
 
 # the loose TAN's options that act only in its loop with heading offsets (filters/loose_turned.py): a value other
 # than the neutral one needs filter.loose_heading_offsets (checked in this order)
-TURNED_LOOP_ONLY = ("loose_fix_fit_one_wild_beam", "loose_reopen_heading", "loose_reopen_position", "loose_first_fix")
+TURNED_LOOP_ONLY = ("loose_fix_fit_one_wild_beam", "loose_reopen_heading", "loose_reopen_position", "loose_first_fix",
+                    "loose_fix_correlation_s")
 
 
 def _yaml_word(value) -> str:
@@ -413,6 +414,10 @@ class FilterSpec(_Strict):
     loose_fix_floor_m: float = new_option(1.0, neutral=5.0, ge=0, description="loose TAN: std added to a fix's own "
                                                                             "[5: sized for the loose PF without "
                                                                             "heading offsets]")
+    loose_fix_correlation_s: float = new_option(
+        0.0, ge=0, description="loose TAN: correlation time of a fix's error (s); above 0 the KF updates with each "
+                               "fix's covariance times (1 + r) / (1 - r), r = exp(-fix interval / this), the "
+                               "variance per fix of a mean of such correlated fixes [0: independent fixes]")
     loose_fix_max_std_m: float = new_option(
         25.0, gt=0, description="loose TAN: a window's terrain-only fix weaker than this is not used")
     loose_fix_misses: int = new_option(

@@ -43,9 +43,23 @@ LooseModel = namedtuple("LooseModel", "sig_pos sig_heading sig_u outside_sigma c
 
 # the closed-loop loose TAN's navigation KF (navigation/eskf.py): process noise std per update
 # (position, heading, z-gyro bias), a fix every ``fix_every`` updates, chi-square gate, std added
-# to a fix, the weakest terrain-only fix used, and the gate rejections in a row after which the
-# KF is reopened
-LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses")
+# to a fix, the weakest terrain-only fix used, the gate rejections in a row after which the
+# KF is reopened, and the factor on a fix's covariance in a KF update (``fix_covariance_scale``; the
+# loop with heading offsets reads it)
+LooseKalman = namedtuple("LooseKalman", "q_pos q_yaw q_bias fix_every gate r_floor fix_max_std misses r_scale",
+                         defaults=(1.0,))
+
+
+def fix_covariance_scale(interval_s: float, correlation_s: float) -> float:
+    """The factor on a fix's covariance when fixes ``interval_s`` apart have errors correlated as a first-order
+    Gauss-Markov process of time constant ``correlation_s``: (1 + r) / (1 - r), r = exp(-interval / correlation),
+    so that a KF counting them as independent gains, per fix, the information the mean of such a sequence of
+    fixes holds (its variance, for many fixes, is the fixes' variance times this factor over their number);
+    1 for independent fixes (``correlation_s`` 0)."""
+    if correlation_s <= 0.0:
+        return 1.0
+    r = math.exp(-interval_s / correlation_s)
+    return (1.0 + r) / (1.0 - r)
 
 # the fix-only loop: the navigation at the K updates (displacements (K-1, 2), position (K, 2),
 # up (K,)), its settings (``half_side``: the initial square's) and what it fills: the

@@ -45,6 +45,8 @@ take the cloud's heading (``reopen_cloud``, ``filter.loose_reopen_heading: cloud
 ``reopen_reset`` (``filter.loose_reopen_position: fix``, docs/filters.md 15) a fix the reopened KF still rejects
 sets its position as a first fix does: a position error beyond a few of the initial standard deviations cannot
 otherwise be corrected by any later fix.
+A KF update takes the fix's covariance times ``kf.r_scale`` (``filter.loose_fix_correlation_s``, 1 by default:
+fixes whose errors are correlated over several fix intervals carry less than independent ones; docs/filters.md 16).
 Everything else (fix interval, chi-square gate, floor, reopening a locked-out KF,
 divergence, keep-on-map) is the built-in loop's.
 """
@@ -277,6 +279,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     mean_p = np.empty(N_TIGHT)
     v_p = np.empty(N_TIGHT)
     r = np.empty((2, 2))
+    r_upd = np.empty((2, 2))  # the fix's covariance in a KF update (``kf.r_scale`` times r)
     dx = np.empty(N_ERROR)
     p_save = np.empty((N_ERROR, N_ERROR))
     m_prior = np.empty(2)
@@ -384,7 +387,10 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                     fixed_out[k] = 1
                 else:
                     copy_matrix(p_save, p_kf)
-                    chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
+                    for i in range(2):  # a reset (first fix, reopened position) takes the fix's own r
+                        for j in range(2):
+                            r_upd[i, j] = r[i, j] * kf.r_scale
+                    chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r_upd, kf.gate, dx)
                     reset = False
                     if not chi2 < kf.gate:
                         rejections += 1
@@ -393,7 +399,7 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
                             if reopen_cloud:  # the particles' yaws are absolute: the cloud's own heading
                                 nav[YAW, 0] += cloud_heading_offset(x[YAW], w, nav[YAW, 0])
                             copy_matrix(p_save, p_kf)
-                            chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r, kf.gate, dx)
+                            chi2 = eskf_update(p_kf, zt[0] - nav[E, 0], zt[1] - nav[N, 0], r_upd, kf.gate, dx)
                             # reopened and still refusing the converged cloud's fix: the KF's position is the lost
                             # part (its initial variance cannot reach the fix), so the fix sets it, as a first fix does
                             reset = reopen_reset and not chi2 < kf.gate

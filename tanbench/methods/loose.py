@@ -20,8 +20,8 @@ from tanbench.methods.registry import MethodRecord, register
 from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.likelihood import likelihood_grid, likelihood_of
 from tanbench.filters.loose import (LOOSE_COLS, FixOnlyOutputs, FixOnlySettings, FixOnlyTrack, KalmanOutputs,
-                                    KalmanSettings, KalmanTrack, LooseKalman, LooseModel, loose_filter_loop,
-                                    loose_kalman_loop)
+                                    KalmanSettings, KalmanTrack, LooseKalman, LooseModel, fix_covariance_scale,
+                                    loose_filter_loop, loose_kalman_loop)
 from tanbench.filters.rng import loop_rng
 from tanbench.filters.loose_turned import LOOSE_TURNED_COLS, Gates, TurnedTrack, loose_turned_loop
 from tanbench.filters.state import N_LOOSE, N_TIGHT
@@ -91,7 +91,8 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     q_bias = s.gyro_bias_instability_deg_h * DEG_PER_H * math.sqrt(2.0 * T / s.gyro_bias_corr_time_s)
     kf = LooseKalman(sc.position_step_m, s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
                      q_bias, max(1, int(round(f.loose_fix_interval_s / T))), f.loose_fix_gate, f.loose_fix_floor_m,
-                     f.loose_fix_max_std_m, f.loose_fix_misses)
+                     f.loose_fix_max_std_m, f.loose_fix_misses,
+                     fix_covariance_scale(max(1, int(round(f.loose_fix_interval_s / T))) * T, f.loose_fix_correlation_s))
     out_en[0] = nav.pos[upd[0], :2]
     out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
