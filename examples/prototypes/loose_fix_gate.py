@@ -55,7 +55,7 @@ CELLS = {  # name -> (scenario, root seed, runs)
 }
 MONTEREY = "configs/monterey.yaml"
 FIELDS = ["cell", "run", "arm", "diverged", "final_horizontal_error_m", "mean_horizontal_error_m",
-          "fixes_accepted", "fixes_rejected"]
+          "fixes_accepted", "fixes_rejected", "nees_mean_whole_run"]
 
 
 def cells() -> dict:
@@ -126,10 +126,16 @@ REOPEN_ROOT = 8122026
 REOPEN_FIX = "reopen-position-fix"
 REOPEN_FIX_ROOT = 9122026
 REOPEN_FIX_REALISM = (9122027, range(80))
+# section 16.2: fixes whose errors are correlated over 40 s (filter.loose_fix_correlation_s: 40), against today's
+# defaults; its own root seeds for section 9's cells and for realism's cells (runs 0-79)
+FIX_CORRELATION = "fix-correlation-40"
+FIX_CORRELATION_ROOT = 10122026
+FIX_CORRELATION_REALISM = (10122027, range(80))
 # candidate -> (its arm's name in the CSV, its filter settings)
 OPTION_CANDIDATES = {FIRST_FIX: ("first-fix", {"loose_first_fix": "posterior"}),
                      REOPEN: ("reopen", {"loose_reopen_heading": "cloud"}),
-                     REOPEN_FIX: ("reopen-fix", {"loose_reopen_position": "fix"})}
+                     REOPEN_FIX: ("reopen-fix", {"loose_reopen_position": "fix"}),
+                     FIX_CORRELATION: ("fix-correlation", {"loose_fix_correlation_s": 40.0})}
 
 
 def _pinned(scenario: Scenario, **options) -> Scenario:
@@ -148,6 +154,12 @@ def as_run_for_section_15(scenario: Scenario) -> Scenario:
     """The defaults section 15 ran against (4 December, 18:00 UTC): ``loose_reopen_position: prior`` (neutral; the
     default since section 15.2), so its pairs keep their keys and seeds."""
     return _pinned(scenario, loose_reopen_position="prior")
+
+
+def as_run_for_section_16(scenario: Scenario) -> Scenario:
+    """The defaults section 16.2 ran against (4 December, fourteenth session): today's, nothing pinned yet (pin here
+    what a later default changes, so that its pairs keep their keys and seeds)."""
+    return scenario
 
 
 def sweep_jobs(label: str, path: str, root: int | None, runs, defaults, fallback: str) -> list:
@@ -220,7 +232,9 @@ PAIRED_TESTS = {"--fallback": PairedTest("posterior", None, "fallback"),
                 "--first-fix": PairedTest(FIRST_FIX, FIRST_FIX_ROOT, "first-fix"),
                 "--reopen": PairedTest(REOPEN, REOPEN_ROOT, "reopen"),
                 "--reopen-fix": PairedTest(REOPEN_FIX, REOPEN_FIX_ROOT, "reopen-fix", as_run_for_section_15,
-                                           REOPEN_FIX_REALISM)}
+                                           REOPEN_FIX_REALISM),
+                "--fix-correlation": PairedTest(FIX_CORRELATION, FIX_CORRELATION_ROOT, "fix-correlation",
+                                                as_run_for_section_16, FIX_CORRELATION_REALISM)}
 
 
 def fallback_ablation(out_csv: str, workers: int, test: str = "--fallback") -> None:
@@ -269,6 +283,31 @@ def fallback_summary(path: str, arm: str = "fallback") -> None:
     print(f"R3 (accuracy: fault-free upper <= +0.2 m, realism upper <= +1.0 m): "
           f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 else 'fails'}")
     print(f"R4 (Monterey: 0 lost with the {arm}): {'holds' if mo[2] == 0 else 'fails'}")
+    if "nees_mean_whole_run" in df.columns:
+        consistency_rule(df, arm)
+
+
+def consistency_rule(df, arm: str) -> None:
+    """Section 16.2's fifth rule: per synthetic cell of section 9 the verdict's ANEES (the mean over its runs of each
+    run's whole-run mean NEES, lost runs included) in each arm, against the band for that many runs
+    (docs/model.md 9.2). (a) every cell above its band at the defaults has a lower ANEES with the candidate; (b) no
+    cell at or below the band's top at the defaults is above it with the candidate; (c) the candidate's ANEES is at
+    least 1.0 in every cell."""
+    from tanbench.metrics.consistency import mc_bounds
+
+    ok_a = ok_b = ok_c = True
+    for name in CELLS:
+        g = df[df["cell"] == name]
+        n = int((g["arm"] == "defaults").sum())
+        lo, hi = mc_bounds(n)
+        a0 = g.loc[g["arm"] == "defaults", "nees_mean_whole_run"].astype(float).mean()
+        a1 = g.loc[g["arm"] == arm, "nees_mean_whole_run"].astype(float).mean()
+        ok_a &= not (a0 > hi) or a1 < a0
+        ok_b &= a0 > hi or not a1 > hi
+        ok_c &= a1 >= 1.0
+        print(f"{name}: {n} runs, band [{lo:.2f}, {hi:.2f}]; ANEES defaults {a0:.2f}, {arm} {a1:.2f}")
+    print(f"R5 (consistency: (a) {'holds' if ok_a else 'fails'}, (b) {'holds' if ok_b else 'fails'}, "
+          f"(c) {'holds' if ok_c else 'fails'}): {'holds' if ok_a and ok_b and ok_c else 'fails'}")
 
 
 def sign_test_p(b: int, c: int) -> float:
