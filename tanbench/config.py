@@ -415,9 +415,10 @@ class FilterSpec(_Strict):
                                                                             "[5: sized for the loose PF without "
                                                                             "heading offsets]")
     loose_fix_correlation_s: float = new_option(
-        0.0, ge=0, description="loose TAN: correlation time of a fix's error (s); above 0 the KF updates with each "
-                               "fix's covariance times (1 + r) / (1 - r), r = exp(-fix interval / this), the "
-                               "variance per fix of a mean of such correlated fixes [0: independent fixes]")
+        40.0, neutral=0.0, ge=0, description="loose TAN: correlation time of a fix's error (s); above 0 the KF updates "
+                                             "with each fix's covariance times (1 + r) / (1 - r), r = exp(-fix interval "
+                                             "/ this), the variance per fix of a mean of such correlated fixes [0: "
+                                             "independent fixes]")
     loose_fix_max_std_m: float = new_option(
         25.0, gt=0, description="loose TAN: a window's terrain-only fix weaker than this is not used")
     loose_fix_misses: int = new_option(

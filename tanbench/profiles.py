@@ -51,6 +51,7 @@ PROFILES: dict[str, dict[str, tuple[object, str]]] = {
         "filter.loose_first_fix": ("terrain-only", "the paper's loose TAN has no KF reset"),
         "filter.loose_reopen_heading": ("navigation", "the paper's loose TAN has no KF reopening"),
         "filter.loose_reopen_position": ("prior", "the paper's loose TAN has no KF reopening"),
+        "filter.loose_fix_correlation_s": (0.0, "the paper's loose TAN treats each fix as a GPS-like independent one"),
         "filter.loose_fix_floor_m": (5.0, "tanbench's earlier fix floor (fix-only architecture: unused)"),
         "filter.tight_regularisation": ("shared", "Algorithm 1 and Section 3.3 describe no jitter (regularisation "
                                                   "none above)"),

@@ -314,7 +314,8 @@ def test_kernel_variant_is_what_the_tight_loop_compiles(monkeypatch):
 
 LOOSE_KALMAN = {"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
                 "loose_fix_prior_gate": None, "loose_fix_fit_one_wild_beam": False,
-                "loose_reopen_heading": "navigation", "loose_reopen_position": "prior"}
+                "loose_reopen_heading": "navigation", "loose_reopen_position": "prior",
+                "loose_fix_correlation_s": 0.0}
 
 
 def test_kernel_variant_is_the_loop_loose_dvl_runs(monkeypatch):

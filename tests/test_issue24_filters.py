@@ -173,7 +173,8 @@ def test_literal_profile_keeps_the_paper_reading():
 # ---- the loose TAN with heading-offset particles (docs/filters.md section 5 items 6-8) ----------------------
 LOOSE_NEUTRAL = {"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
                  "loose_fix_prior_gate": None, "loose_fix_fit_one_wild_beam": False,
-                 "loose_reopen_heading": "navigation", "loose_reopen_position": "prior", "loose_fix_floor_m": 5.0}
+                 "loose_reopen_heading": "navigation", "loose_reopen_position": "prior", "loose_fix_floor_m": 5.0,
+                 "loose_fix_correlation_s": 0.0}
 
 
 def test_propagate_loose_turned_matches_numpy():

@@ -34,7 +34,8 @@ def test_the_diagnosed_run_is_lost_by_its_fixes_and_kept_by_the_gate():
     sc = Scenario(**{**quick.model_dump(mode="json"),
                      "filter": {**quick.model_dump(mode="json")["filter"], "loose_fix_prior_gate": None,
                                 "recovery": "estimate", "loose_fix_fit_one_wild_beam": False,
-                                "loose_reopen_heading": "navigation", "loose_reopen_position": "prior"}})
+                                "loose_reopen_heading": "navigation", "loose_reopen_position": "prior",
+                                "loose_fix_correlation_s": 0.0}})
     assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 10, 2000)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
@@ -56,7 +57,7 @@ def test_the_fallback_needs_the_gate_and_keeps_the_diagnosed_run():
     sweep = load_sweep("configs/quick.yaml")
     sc = _with_filter(sweep.cells[0].scenario, loose_fix_fit_one_wild_beam=False,  # the keys of the test's writing
                       loose_reopen_heading="navigation",
-                      loose_reopen_position="prior")
+                      loose_reopen_position="prior", loose_fix_correlation_s=0.0)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 2))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 2)
     data = sc.model_dump(mode="json")
@@ -80,7 +81,7 @@ def _diagnosed_outlier_run():
                 and c.scenario.filter.likelihood == "student-t" and c.scenario.filter.map_aware_likelihood)
     sc = _with_filter(cell, loose_fix_fit_test=True, loose_fix_fit_one_wild_beam=False,
                       loose_reopen_heading="navigation",
-                      loose_reopen_position="prior")
+                      loose_reopen_position="prior", loose_fix_correlation_s=0.0)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 9))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 9)
     return sc, lambda s: run_method(s, "loose-dvl", vehicle,
@@ -145,7 +146,8 @@ def test_the_first_fix_from_the_posterior_is_an_option_and_keeps_section_7_4s_lo
     sc = Scenario(terrain={"kind": "synthetic", "seed": 1}, area="A", map_resolution_m=10, noise_m=1.0,
                   sampling_time_s=1, particles=2000,
                   filter={"loose_reopen_heading": "navigation",
-                          "loose_reopen_position": "prior"})  # the keys of the test's writing
+                          "loose_reopen_position": "prior",
+                          "loose_fix_correlation_s": 0.0})  # the keys of the test's writing
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(root, sc.pairing_key(), 28))
     fseed = keyed_filter_seed(root, sc.cell_key(), get("loose-dvl").seed_id, 28)
     runs = {name: run_method(s, "loose-dvl", vehicle,
@@ -182,7 +184,7 @@ def test_the_reopened_heading_is_an_option_and_keeps_the_diagnosed_30_m_run():
                          "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "cloud"})
     sweep = load_sweep("configs/zhou2017.yaml")
     sc = _with_filter(sweep.cells[2].scenario, loose_reopen_heading="navigation",
-                      loose_reopen_position="prior")  # the keys of the test's writing
+                      loose_reopen_position="prior", loose_fix_correlation_s=0.0)  # the keys of the test's writing
     assert (sc.area, sc.map_resolution_m, sc.particles) == ("A", 30, 3000)
     vehicle = simulate_vehicle(sc, keyed_vehicle_seed(sweep.spec.seed, sc.pairing_key(), 3))
     fseed = keyed_filter_seed(sweep.spec.seed, sc.cell_key(), get("loose-dvl").seed_id, 3)
@@ -211,7 +213,8 @@ def test_the_reopened_position_is_an_option_and_keeps_the_diagnosed_area_a_run()
     root, area = 14140014, {"terrain": {"kind": "synthetic", "seed": 1}, "area": "A", "map_resolution_m": 10,
                             "noise_m": 1.0, "sampling_time_s": 1, "particles": 3000}
     vehicle = simulate_vehicle(Scenario(**area), keyed_vehicle_seed(root, Scenario(**area).pairing_key(), 8))
-    sc = Scenario(**{**area, "particles": 2000, "filter": {"loose_reopen_position": "prior"}})  # its writing's keys
+    sc = Scenario(**{**area, "particles": 2000,
+                     "filter": {"loose_reopen_position": "prior", "loose_fix_correlation_s": 0.0}})  # its writing's keys
     fseed = keyed_filter_seed(root, sc.cell_key(), get("loose-dvl").seed_id, 8)
     runs = {name: run_method(s, "loose-dvl", vehicle,
                              np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key)).metrics
@@ -219,3 +222,37 @@ def test_the_reopened_position_is_an_option_and_keeps_the_diagnosed_area_a_run()
     assert runs["defaults"]["final_horizontal_error_m"] > 100.0
     assert abs(runs["defaults"]["final_heading_error_deg"]) < 5.0  # the heading is right: the position is what is lost
     assert runs["fix"]["final_horizontal_error_m"] < 10.0
+
+
+def test_correlated_fixes_are_the_default_and_widen_the_kalman_covariance():
+    """docs/filters.md 16: a fix error correlated over ``filter.loose_fix_correlation_s`` (40 s, the default since
+    16.3; 0, independent fixes, is neutral and the literal profile's) scales each fix's covariance in a KF update by
+    (1 + r) / (1 - r), r = exp(-interval / time constant). On the same vehicle data and filter seed the KF then
+    reports a larger position variance once fixes arrive."""
+    import math
+
+    from tanbench.filters.loose import fix_covariance_scale
+
+    assert Scenario().filter.loose_fix_correlation_s == 40.0
+    assert "loose_fix_correlation_s" not in str(Scenario(filter={"loose_fix_correlation_s": 0.0}).identity())
+    assert Scenario(filter={"loose_fix_correlation_s": 0.0}).cell_key() != Scenario().cell_key()
+    with pytest.raises(ValidationError, match="loose_fix_correlation_s"):
+        Scenario(filter={"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+                         "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "navigation",
+                         "loose_reopen_position": "prior"})
+    assert fix_covariance_scale(10.0, 0.0) == 1.0
+    r = math.exp(-0.25)
+    assert fix_covariance_scale(10.0, 40.0) == pytest.approx((1 + r) / (1 - r)) and fix_covariance_scale(10.0, 40.0) > 8
+    sc = Scenario(area="B", duration_s=400.0)
+    ss = np.random.SeedSequence([16, 3])
+    vehicle = simulate_vehicle(sc, ss.spawn(1)[0])
+    fseed = ss.spawn(2)[1]
+    late = {}
+    for tau in (0.0, 40.0):
+        out = run_method(_with_filter(sc, loose_fix_correlation_s=tau), "loose-dvl", vehicle,
+                         np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
+        t = np.asarray(out.series["t"])
+        var = np.asarray(out.series["var_e"]) + np.asarray(out.series["var_n"])
+        assert out.metrics["fixes_accepted"] >= 10
+        late[tau] = var[t >= 200].mean()
+    assert late[40.0] > 2.0 * late[0.0]

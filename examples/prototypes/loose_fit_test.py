@@ -54,6 +54,7 @@ def as_tested(scenario: Scenario) -> Scenario:
     data["filter"]["loose_fix_fit_one_wild_beam"] = False
     data["filter"]["loose_reopen_heading"] = "navigation"  # neutral; the default since section 14.2
     data["filter"]["loose_reopen_position"] = "prior"  # neutral; the default since section 15.1
+    data["filter"]["loose_fix_correlation_s"] = 0.0  # neutral; the default since section 16.3
     return Scenario(**data)
 
 
