@@ -89,10 +89,10 @@ def _run_kalman_feedback(ctx, rng, x, offsets, model, out_en, var, ess, reinit, 
     p_kf[EB, EB] = f.initial_std_gyro_bias_rad_s ** 2
     # the random walk that keeps a first-order Gauss-Markov bias's steady-state std (data sheet values)
     q_bias = s.gyro_bias_instability_deg_h * DEG_PER_H * math.sqrt(2.0 * T / s.gyro_bias_corr_time_s)
+    fix_every = max(1, int(round(f.loose_fix_interval_s / T)))  # updates between fixes
     kf = LooseKalman(sc.position_step_m, s.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(T),
-                     q_bias, max(1, int(round(f.loose_fix_interval_s / T))), f.loose_fix_gate, f.loose_fix_floor_m,
-                     f.loose_fix_max_std_m, f.loose_fix_misses,
-                     fix_covariance_scale(max(1, int(round(f.loose_fix_interval_s / T))) * T, f.loose_fix_correlation_s))
+                     q_bias, fix_every, f.loose_fix_gate, f.loose_fix_floor_m, f.loose_fix_max_std_m, f.loose_fix_misses,
+                     fix_covariance_scale(fix_every * T, f.loose_fix_correlation_s))
     out_en[0] = nav.pos[upd[0], :2]
     out_yaw, out_bias, var_yaw = np.empty(k), np.empty(k), np.empty(k)
     rejected, healthy = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64)
