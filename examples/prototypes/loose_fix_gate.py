@@ -226,8 +226,8 @@ def reopen_realism_summary(path: str) -> None:
 # the paired tests of sections 9.1, 12, 13, 14.1 and 15: command-line flag -> the candidate as _pair reads it, the
 # root seed of section 9's cells (None: section 9's own), the candidate's name in the printout, the defaults it ran
 # against and realism's (root seed, runs) when not its own seed's first 20
-PairedTest = namedtuple("PairedTest", "candidate root name defaults realism",
-                        defaults=(as_run_on_4_december, None))
+PairedTest = namedtuple("PairedTest", "candidate root name defaults realism loss_guard",
+                        defaults=(as_run_on_4_december, None, False))
 PAIRED_TESTS = {"--fallback": PairedTest("posterior", None, "fallback"),
                 "--gate-again": PairedTest("refuse", GATE_AGAIN_ROOT, "gate"),
                 "--first-fix": PairedTest(FIRST_FIX, FIRST_FIX_ROOT, "first-fix"),
@@ -235,13 +235,13 @@ PAIRED_TESTS = {"--fallback": PairedTest("posterior", None, "fallback"),
                 "--reopen-fix": PairedTest(REOPEN_FIX, REOPEN_FIX_ROOT, "reopen-fix", as_run_for_section_15,
                                            REOPEN_FIX_REALISM),
                 "--fix-correlation": PairedTest(FIX_CORRELATION, FIX_CORRELATION_ROOT, FIX_CORRELATION_ARM,
-                                                as_run_for_section_16, FIX_CORRELATION_REALISM)}
+                                                as_run_for_section_16, FIX_CORRELATION_REALISM, loss_guard=True)}
 
 
 def fallback_ablation(out_csv: str, workers: int, test: str = "--fallback") -> None:
     t = PAIRED_TESTS[test]
     write_rows(out_csv, FIELDS, _pair, fallback_jobs(t.candidate, t.root, t.defaults, t.realism), workers)
-    fallback_summary(out_csv, t.name)
+    fallback_summary(out_csv, t.name, t.loss_guard)
 
 
 def _t_interval(diff):
@@ -252,9 +252,10 @@ def _t_interval(diff):
     return mean, mean - t * sem, mean + t * sem
 
 
-def fallback_summary(path: str, arm: str = "fallback") -> None:
+def fallback_summary(path: str, arm: str = "fallback", loss_guard: bool = False) -> None:
     """Section 9.1's four rules (section 12's too) on the CSV of :func:`fallback_ablation`; ``arm`` names the
-    candidate in the printout."""
+    candidate in the printout; ``loss_guard``: also rule 1 as a guard (c <= b, section 16.2's amendment); with the
+    runs' NEES in the CSV, section 16.2's fifth rule (:func:`consistency_rule`)."""
     import pandas as pd
 
     df = pd.read_csv(path)
@@ -280,7 +281,7 @@ def fallback_summary(path: str, arm: str = "fallback") -> None:
               + (f"{m[0]:+.3f} m [{m[1]:+.3f}, {m[2]:+.3f}]" if m else "n/a"))
     ff, re, mo = (out[k] for k in groups)
     print(f"R1 (fault-free lost runs, p < 0.05): {'holds' if sign_test_p(ff[3], ff[4]) < 0.05 else 'fails'}")
-    if arm == FIX_CORRELATION_ARM:  # section 16.2's rule 1, amended before its runs: a guard, as rule 2
+    if loss_guard:  # section 16.2's rule 1, amended before its runs: a guard, as rule 2
         print(f"R1 amended (section 16.2: fault-free c <= b): {'holds' if ff[4] <= ff[3] else 'fails'}")
     print(f"R2 (realism: c <= b): {'holds' if re[4] <= re[3] else 'fails'}")
     print(f"R3 (accuracy: fault-free upper <= +0.2 m, realism upper <= +1.0 m): "
@@ -444,7 +445,8 @@ if __name__ == "__main__":
     elif args[:1] and args[0] in PAIRED_TESTS:
         fallback_ablation(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2, args[0])
     elif args[:1] and args[0].removesuffix("-summary") in PAIRED_TESTS:
-        fallback_summary(args[1], PAIRED_TESTS[args[0].removesuffix("-summary")].name)
+        t = PAIRED_TESTS[args[0].removesuffix("-summary")]
+        fallback_summary(args[1], t.name, t.loss_guard)
     elif args[:1] == ["--reopen-realism"]:
         reopen_realism(args[1], int(args[args.index("--workers") + 1]) if "--workers" in args else 2)
     elif args[:1] == ["--reopen-realism-summary"]:

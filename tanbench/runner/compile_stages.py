@@ -107,17 +107,15 @@ def shares_for(groups, scenario=None) -> list[list]:
     cell of ``scenario`` (:func:`tanbench.runner.plan.kernel_variant`): the table holds the default
     variant's argument types."""
     table = load_table().get("shares", {})
-    nothing = [[] for _ in groups]
-    families = [{family_of(m) for m in g} for g in groups]
-    where = {f: [i for i, fams in enumerate(families) if f in fams] for f in table}
-    if not table or any(len(found) != 1 for found in where.values()) or len({w[0] for w in where.values()}) < len(table):
-        return nothing
+    shares = [[] for _ in groups]
+    group_of = {family_of(m): i for i, g in enumerate(groups) for m in g}  # compile_groups keeps a family whole
+    if not table or any(f not in group_of for f in table) or len({group_of[f] for f in table}) < len(table):
+        return shares
     if scenario is not None and any(kernel_variant(m, scenario) for g in groups for m in g
                                     if family_of(m) in RECORDED):
-        return nothing
-    shares = [list(s) for s in nothing]
+        return shares
     for family, entries in table.items():
-        shares[where[family][0]] = list(entries)
+        shares[group_of[family]] = list(entries)
     return shares
 
 
