@@ -33,8 +33,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
                               LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK,
                               LOOSE_REOPEN_HEADING, LOOSE_REOPEN_POSITION, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
-                              POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, REGULARISATION,
-                              REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
+                              POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, RECOVERY_SEARCH_AROUND,
+                              REGULARISATION, REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
@@ -516,6 +516,10 @@ class FilterSpec(_Strict):
     recovery_fix_std_m: float = new_option(
         10.0, gt=0, description="global recovery: a match whose likelihood std (TERCOM's ambiguity test) is above "
                                 "this is not used (the built-in re-draw instead)")
+    recovery_search_around: choices(RECOVERY_SEARCH_AROUND) = new_option(
+        "estimate", description="global recovery: search the square around the diverged filter's estimate only, or, "
+                                "when that match is refused, a second square around the navigation solution "
+                                "(docs/filters.md 17) [estimate]")
     # issue 24's accuracy study (docs/filters.md section 7): the likelihood's width
     range_noise: choices(RANGE_NOISE) = new_option(
         "table-2", description="every method's range (altitude) noise in the likelihood: Table 2's "

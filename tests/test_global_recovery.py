@@ -47,10 +47,11 @@ def _survey(k=80, turn_deg=17.0, start=(400.0, 350.0)):
     return truth, inc
 
 
-def _reloc(zmap, offsets, window, half_side=150.0, fix_std=10.0, span_deg=30.0, step_deg=2.0):
+def _reloc(zmap, offsets, window, half_side=150.0, fix_std=10.0, span_deg=30.0, step_deg=2.0, nav_en=None):
     res = 1.0 / zmap.inv_re
     return rl.Relocalise(offsets, zmap, rl.heading_candidates(math.radians(span_deg), math.radians(step_deg)),
-                         int(math.ceil(half_side / res)), res, window, 1.0, fix_std)
+                         int(math.ceil(half_side / res)), res, window, 1.0, fix_std,
+                         np.empty((0, 2)) if nav_en is None else np.ascontiguousarray(nav_en, dtype=np.float64))
 
 
 def test_heading_candidates():
@@ -167,6 +168,46 @@ def test_a_match_at_the_end_of_the_headings_is_refused():
     assert not rl.global_match_numpy(pe, pn, ph, truth[79, 0], truth[79, 1], 60, reloc)[0]
     wide = _reloc(zmap, offsets, 60, half_side=15.0, span_deg=50.0)
     assert rl.relocalise(inc, up, 79, truth[79, 0], truth[79, 1], wide)[0]
+
+
+def test_a_refused_match_around_the_estimate_is_tried_around_the_navigation_solution():
+    """``recovery_search_around: estimate-then-navigation``: an estimate that has run farther from the vehicle
+    than half the square is refused (the truth is outside it); the second square, around the navigation
+    solution, holds the vehicle and finds it. Without navigation centres (the default) nothing more is tried;
+    an accepted first match is not searched again; the jitted kernel against its reference."""
+    zmap = _toy_map()
+    truth, inc, offsets, up = _single_beam_case(zmap, noise=0.3)
+    k = 79
+    far = truth[k] + [180.0, -160.0]  # the diverged estimate: the truth is outside its +-100 m square
+    nav = np.tile(truth[k] + [35.0, 25.0], (k + 1, 1))  # the navigation solution, 43 m off
+    alone = _reloc(zmap, offsets, 60, half_side=100.0)
+    both = _reloc(zmap, offsets, 60, half_side=100.0, nav_en=nav)
+    assert not rl.relocalise(inc, up, k, far[0], far[1], alone)[0]
+    assert not rl.relocalise_around(inc, up, k, far[0], far[1], alone)[0]
+    found, east, north, _ = rl.relocalise_around(inc, up, k, far[0], far[1], both)
+    assert found and math.hypot(east - truth[k, 0], north - truth[k, 1]) < 3.0
+    want = rl.relocalise_around_numpy(inc, up, k, far[0], far[1], both)
+    assert want[0]
+    np.testing.assert_allclose((east, north), want[1:3], rtol=0, atol=1e-9)
+    near = truth[k] + [20.0, -10.0]  # a first match accepted: the same answer with or without the second square
+    np.testing.assert_array_equal(rl.relocalise_around(inc, up, k, near[0], near[1], both),
+                                  rl.relocalise(inc, up, k, near[0], near[1], alone))
+    short = _reloc(zmap, offsets, 60, half_side=100.0, nav_en=nav[:k])  # no centre at this update: not tried
+    assert not rl.relocalise_around(inc, up, k, far[0], far[1], short)[0]
+
+
+def test_the_second_square_is_an_option_with_a_neutral_default():
+    """``estimate`` leaves every cell key as it was and the search bundle without navigation centres;
+    ``estimate-then-navigation`` keeps the navigation solution the method passes."""
+    nav = np.arange(20.0).reshape(10, 2)
+    assert Scenario().filter.recovery_search_around == "estimate"
+    assert Scenario().cell_key() == Scenario(filter={"recovery_search_around": "estimate"}).cell_key()
+    second = Scenario(filter={"recovery_search_around": "estimate-then-navigation"})
+    assert second.cell_key() != Scenario().cell_key()
+    assert rl.global_search_of(Scenario().filter, nav).nav_en is None
+    np.testing.assert_array_equal(rl.global_search_of(second.filter, nav).nav_en, nav)
+    no_search = Scenario(filter={"recovery": "estimate", "recovery_search_around": "estimate-then-navigation"})
+    assert rl.global_search_of(no_search.filter, nav) is None
 
 
 def test_global_is_the_default_and_estimate_its_neutral_value():

@@ -12,6 +12,7 @@ map, the survey) is tanbench's own options.
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --third    # J17-J24 (40 m second scale)
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --all      # J1-J24
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --unseen   # J25-J40 (section 10's test worlds)
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --section-17   # J41-J56 (section 17's)
     .venv/bin/tanbench run OUT_DIR/J1.yaml --out OUT_DIR/J1 --quiet --series none
     .venv/bin/python examples/prototypes/heldout_relief.py --summary RESULTS_DIR   # a table of RESULTS_DIR/J*/
 
@@ -45,6 +46,12 @@ SETS = {  # name -> (first world number, centres, the second scale's node spacin
 UNSEEN_SETS = {
     "fourth": (25, ((0.35, 0.15), (0.65, 0.85), (0.12, 0.35), (0.88, 0.62)), 32.0, range(24240035, 24240043)),
     "fifth": (33, ((0.45, 0.3), (0.55, 0.7), (0.3, 0.45), (0.7, 0.55)), 16.0, range(24240043, 24240051)),
+}
+# the test worlds of docs/filters.md section 17 (the second search square), fixed before any run on them: other
+# centres and two more scales (20 m and 28 m); `--section-17` builds them
+SECTION_17_SETS = {
+    "sixth": (41, ((0.4, 0.2), (0.6, 0.8), (0.2, 0.6), (0.8, 0.4)), 20.0, range(24240051, 24240059)),
+    "seventh": (49, ((0.35, 0.65), (0.65, 0.35), (0.45, 0.85), (0.55, 0.2)), 28.0, range(24240059, 24240067)),
 }
 
 
@@ -99,7 +106,7 @@ def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) ->
 def main(out: Path, which: str = "first") -> None:
     out.mkdir(parents=True, exist_ok=True)
     z, dx, dy = read_dem()
-    first, centres, spacing, seed_range = {**SETS, **UNSEEN_SETS}[which]
+    first, centres, spacing, seed_range = {**SETS, **UNSEEN_SETS, **SECTION_17_SETS}[which]
     scales = ((dx, dy), (spacing, spacing))
     seeds = iter(seed_range)
     k = first - 1
@@ -167,6 +174,9 @@ if __name__ == "__main__":
             main(Path(args[0]), which)
     elif len(args) == 2 and args[1] == "--unseen":
         for which in UNSEEN_SETS:
+            main(Path(args[0]), which)
+    elif len(args) == 2 and args[1] == "--section-17":
+        for which in SECTION_17_SETS:
             main(Path(args[0]), which)
     elif len(args) in (1, 2) and (len(args) == 1 or args[1] in ("--second", "--third")):
         main(Path(args[0]), args[1][2:] if len(args) == 2 else "first")

@@ -48,14 +48,17 @@ from tanbench.navigation.increments import D0E, D0N
 from tanbench.terrain.grid import MapArgs
 
 # the spec's side of the search (Python only): profile length in updates, half side of the
-# translation square (m), heading span and step (rad), the ambiguity test's std (m)
-GlobalSearch = namedtuple("GlobalSearch", "window half_side span step fix_std")
+# translation square (m), heading span and step (rad), the ambiguity test's std (m), and the
+# navigation solution's east and north at the updates (K, 2) when a refused match around the
+# estimate is tried again around it (``filter.recovery_search_around``), else None
+GlobalSearch = namedtuple("GlobalSearch", "window half_side span step fix_std nav_en")
 
 # what the jitted loop takes: the beams' navigation-frame vectors times ranges at every update
 # (K, m, 3; NaN without a range), the map (``MapArgs``), the heading candidates (D,), the search
 # square's half side in cells and its cell (m), the profile length, the altitude std of the
-# ambiguity test's likelihood and its position std threshold
-Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step window sig_u fix_std")
+# ambiguity test's likelihood and its position std threshold, and the second search's centres at
+# the updates (K, 2; no rows: no second search)
+Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step window sig_u fix_std nav_en")
 
 # refinement around the best coarse candidate: +-FINE_CELLS steps of a fifth of the map spacing (as TERCOM's)
 FINE_CELLS = 5
@@ -66,14 +69,16 @@ ALIGNED_TOL = 1e-12
 MIN_UPDATES = 120
 
 
-def global_search_of(f):
+def global_search_of(f, nav_en=None):
     """The :class:`GlobalSearch` of a ``FilterSpec`` with ``recovery: global``, else None (the loop
-    then compiles without the search)."""
+    then compiles without the search). ``nav_en``: the navigation solution's east and north at the
+    updates (K, 2), kept when ``f.recovery_search_around`` asks for the second search around it."""
     if f.recovery != "global":
         return None
+    second = f.recovery_search_around == "estimate-then-navigation" and nav_en is not None
     return GlobalSearch(int(f.recovery_profile_updates), f.recovery_max_side_m / 2.0,
                         math.radians(f.recovery_heading_span_deg), math.radians(f.recovery_heading_step_deg),
-                        float(f.recovery_fix_std_m))
+                        float(f.recovery_fix_std_m), np.ascontiguousarray(nav_en, dtype=np.float64) if second else None)
 
 
 def heading_candidates(span, step) -> np.ndarray:
@@ -94,9 +99,10 @@ def relocaliser(search: GlobalSearch, track, beams, ranges, grid, sig_u: float) 
     offsets = nav_frame_offsets(track.pitch, track.roll, track.yaw, beams, ranges)
     zmap = map_of_grid(grid)
     res = 1.0 / min(zmap.inv_re, zmap.inv_rn)
+    nav_en = search.nav_en if search.nav_en is not None else np.empty((0, 2))
     return Relocalise(offsets, zmap, heading_candidates(search.span, search.step),
                       int(math.ceil(search.half_side / res)), float(res), int(search.window), float(sig_u),
-                      float(search.fix_std))
+                      float(search.fix_std), nav_en)
 
 
 @nb.njit(cache=True)
@@ -313,3 +319,36 @@ def relocalise(inc, up, k, centre_e, centre_n, reloc):
     if 2 * npts < updates:
         return False, centre_e, centre_n, 0.0
     return global_match(pe[:npts], pn[:npts], ph[:npts], centre_e, centre_n, min(npts, updates), reloc)
+
+
+@nb.njit(cache=True)
+def relocalise_around(inc, up, k, est_e, est_n, reloc):
+    """:func:`relocalise` around the diverged filter's estimate; when that match is refused and
+    ``reloc.nav_en`` holds the navigation solution at update ``k``, again around it (a filter that
+    followed a wrong path may have left the vehicle farther behind than half the square, while the
+    navigation solution drifts only with its own errors; docs/filters.md 17). Same returns."""
+    found, east, north, delta = relocalise(inc, up, k, est_e, est_n, reloc)
+    if found or k >= reloc.nav_en.shape[0]:
+        return found, east, north, delta
+    return relocalise(inc, up, k, reloc.nav_en[k, 0], reloc.nav_en[k, 1], reloc)
+
+
+def relocalise_around_numpy(inc, up, k, est_e, est_n, reloc):
+    """Plain-Python reference of :func:`relocalise_around`: the jitted profile of each centre, matched by
+    :func:`global_match_numpy`."""
+    centres = [(est_e, est_n)] + ([tuple(reloc.nav_en[k])] if k < reloc.nav_en.shape[0] else [])
+    answer = (False, est_e, est_n, 0.0)
+    for ce, cn in centres:
+        updates = min(k + 1, reloc.window)
+        if updates < min(MIN_UPDATES, reloc.window):
+            return False, ce, cn, 0.0
+        cap = updates * reloc.offsets.shape[1]
+        pe, pn, ph = np.empty(cap), np.empty(cap), np.empty(cap)
+        npts = relative_profile(inc, reloc.offsets, up, k, updates, pe, pn, ph)
+        if 2 * npts < updates:
+            answer = (False, ce, cn, 0.0)
+            continue
+        answer = global_match_numpy(pe[:npts], pn[:npts], ph[:npts], ce, cn, min(npts, updates), reloc)
+        if answer[0]:
+            return answer
+    return answer

@@ -50,7 +50,7 @@ from tanbench.filters.bias_walk import tight_bias_walk_std, walk_biases
 from tanbench.filters.posterior import REG_POSTERIOR, resample_posterior
 from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
 from tanbench.filters.recovery import recovery_square
-from tanbench.filters.relocalise import relocalise, relocaliser
+from tanbench.filters.relocalise import relocalise_around, relocaliser
 from tanbench.filters.resample import Resampling, add_log_weights, normalise_with_ess, resample_and_regularise, resampling_of
 from tanbench.filters.rng import fill_normals, rng_state, set_rng_state
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
@@ -369,7 +369,7 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
                 if stop_to_search:
                     return k
                 if reloc is not None:
-                    found, match_e, match_n, match_turn = relocalise(inc, nav_up, k, mean[E], mean[N], reloc)
+                    found, match_e, match_n, match_turn = relocalise_around(inc, nav_up, k, mean[E], mean[N], reloc)
                     if found:
                         centre_e, centre_n, half, turn = match_e, match_n, prior.reinit_half_side, match_turn
             draw_tight(x, rng, centre_e, centre_n, nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k] + turn, prior,

@@ -75,7 +75,8 @@ def run_tight(ctx: MethodContext, sensor: str, sonar=None) -> MethodOutput:
     x, rng = tight_start(ctx, settings)
     out = new_tight_outputs(ctx.updates.imu.size)
     tight_filter_loop(x, rng, tight_track(ctx), np.ascontiguousarray(ranges), np.ascontiguousarray(beams),
-                      likelihood_grid(sc.filter, ctx.nmap), settings, out, global_search_of(sc.filter))
+                      likelihood_grid(sc.filter, ctx.nmap), settings, out,
+                      global_search_of(sc.filter, ctx.nav.pos[ctx.updates.imu, :2]))
     est, var = out.est, out.var
     return MethodOutput(
         east=est[:, E], north=est[:, N], up=est[:, U], yaw=est[:, YAW],

@@ -1,0 +1,142 @@
+"""``filter.recovery_search_around: estimate-then-navigation`` against the defaults (docs/filters.md 17): paired runs.
+
+Every run's vehicle data and filter seed are those of the defaults' keys (as ``global_recovery.py``); each tight
+method of a cell runs at the defaults and, with the second search square, on the same data and seed. The arms
+can differ only after a divergence fired (a search runs only then), so a run whose defaults arm was never
+reinitialised is the same run in both arms: its candidate row is the defaults' row, marked ``copied``, not run
+again. ``--roots`` runs each sweep again with other root seeds (other realisations of the same cells).
+
+    .venv/bin/python examples/prototypes/nav_centred_search.py OUT.csv SWEEP[:RUNS] ... [--roots R1,R2]
+        [--methods tight-sbe,tight-dvl] [--workers 2]
+    .venv/bin/python examples/prototypes/nav_centred_search.py --summary OUT.csv
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from global_recovery import TIGHT
+from loose_fix_gate import _t_interval, sign_test_p, write_rows
+from tanbench.config import Scenario
+from tanbench.methods import get, run_method
+from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
+from tanbench.simulation import simulate_vehicle
+from tanbench.sweep import load_sweep
+
+CANDIDATE = "navigation"
+FIELDS = ["group", "cell", "root", "run", "method", "arm", "copied", "diverged", "final_horizontal_error_m",
+          "mean_horizontal_error_m", "reinitialisations", "recoveries", "filter_wall_s"]
+
+
+def with_second_square(scenario: Scenario) -> Scenario:
+    data = scenario.model_dump(mode="json")
+    data["filter"]["recovery_search_around"] = "estimate-then-navigation"
+    return Scenario(**data)
+
+
+def jobs(sweeps: list, roots: list | None, methods: list | None) -> list:
+    """(group, cell name, scenario, root, run, methods) of every run of every distinct cell of ``sweeps``
+    ((group, path, runs)), once per root seed (the sweep's own when ``roots`` is None)."""
+    out = []
+    for group, path, runs in sweeps:
+        sweep = load_sweep(path)
+        tight = [m for m in sweep.spec.methods if m in TIGHT and (methods is None or m in methods)]
+        seen = set()
+        for cell in sweep.cells:
+            if cell.cell_id in seen or not tight:
+                continue
+            seen.add(cell.cell_id)
+            for root in roots or [sweep.spec.seed]:
+                out += [(group, f"{group}:{cell.cell_id[:8]}", cell.scenario, root, r, tight) for r in range(runs)]
+    return out
+
+
+def _pair(job):
+    group, name, scenario, root, run, methods = job
+    vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
+    rows = []
+    for method in methods:
+        fseed = keyed_filter_seed(root, scenario.cell_key(), get(method).seed_id, run)
+        base = {"group": group, "cell": name, "root": root, "run": run, "method": method}
+        m = run_method(scenario, method, vehicle, np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
+        defaults = {k: m.metrics[k] for k in FIELDS[7:]}
+        rows.append({**base, "arm": "defaults", "copied": False, **defaults})
+        if defaults["reinitialisations"] == 0:  # no divergence: the candidate's run is this run
+            rows.append({**base, "arm": CANDIDATE, "copied": True, **defaults})
+            continue
+        c = run_method(with_second_square(scenario), method, vehicle,
+                       np.random.SeedSequence(fseed.entropy, spawn_key=fseed.spawn_key))
+        rows.append({**base, "arm": CANDIDATE, "copied": False, **{k: c.metrics[k] for k in FIELDS[7:]}})
+    return rows
+
+
+def paired(df):
+    import pandas as pd
+
+    df = df.copy()
+    df["diverged"] = df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])
+    return df.pivot_table(index=["group", "cell", "root", "run", "method"], columns="arm",
+                          values=["diverged", "final_horizontal_error_m", "reinitialisations", "filter_wall_s"],
+                          aggfunc="first").pipe(pd.DataFrame)
+
+
+def describe(label: str, g) -> tuple:
+    """(pairs, lost defaults, lost candidate, b, c, (mean, low, high) of the kept pairs' final-error difference)."""
+    d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", CANDIDATE)].astype(bool)
+    b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
+    kept = g[~d0 & ~d1]
+    diff = (kept[("final_horizontal_error_m", CANDIDATE)] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
+    ci = _t_interval(diff) if diff.size > 1 and diff.std() > 0 else (float(diff.mean()) if diff.size else 0.0,) * 3
+    wall = g[("filter_wall_s", CANDIDATE)].sum() / g[("filter_wall_s", "defaults")].sum()
+    print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with the second square {int(d1.sum())}; "
+          f"b = {b} (defaults only), c = {c} (candidate only); one-sided sign test p = {sign_test_p(b, c):.4f}; "
+          f"final error candidate - defaults {ci[0]:+.3f} m [{ci[1]:+.3f}, {ci[2]:+.3f}] ({diff.size} kept in both); "
+          f"reinitialisations {int(g[('reinitialisations', 'defaults')].sum())} / "
+          f"{int(g[('reinitialisations', CANDIDATE)].sum())}; filter time x{wall:.2f}")
+    return len(g), int(d0.sum()), int(d1.sum()), b, c, ci
+
+
+def summary(path: str) -> None:
+    """Every group's pairs, then per method (the rules are docs/filters.md 17's, printed there)."""
+    import pandas as pd
+
+    wide = paired(pd.read_csv(path))
+    for group in wide.index.get_level_values("group").unique():
+        describe(group, wide[wide.index.get_level_values("group") == group])
+    for method in wide.index.get_level_values("method").unique():
+        describe(f"  {method}, all groups", wide[wide.index.get_level_values("method") == method])
+    df = pd.read_csv(path)
+    lost = df[df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])]
+    print("\nlost runs (either arm): group, cell, root, run, method, arm, final error (m)")
+    for r in lost.itertuples():
+        print(f"  {r.group} {r.cell} {r.root} {r.run} {r.method} {r.arm} {r.final_horizontal_error_m:.1f}")
+
+
+def _sweeps(args: list) -> list:
+    out = []
+    for a in args:
+        path, _, runs = a.partition(":")
+        out.append((path.rsplit("/", 1)[-1].removesuffix(".yaml"), path, int(runs) if runs else 10))
+    return out
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    if args[:1] == ["--summary"]:
+        summary(args[1])
+        raise SystemExit(0)
+    opts = {}
+    for flag in ("--roots", "--methods", "--workers"):
+        if flag in args:
+            i = args.index(flag)
+            opts[flag] = args[i + 1]
+            del args[i:i + 2]
+    if len(args) < 2:
+        raise SystemExit(__doc__)
+    roots = [int(r) for r in opts["--roots"].split(",")] if "--roots" in opts else None
+    methods = opts["--methods"].split(",") if "--methods" in opts else None
+    write_rows(args[0], FIELDS, _pair, jobs(_sweeps(args[1:]), roots, methods), int(opts.get("--workers", 2)),
+               chunksize=1)
+    summary(args[0])
