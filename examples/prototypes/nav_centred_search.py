@@ -6,7 +6,7 @@ can differ only after a divergence fired (a search runs only then), so a run who
 reinitialised is the same run in both arms: its candidate row is the defaults' row, marked ``copied``, not run
 again. ``--roots`` runs each sweep again with other root seeds (other realisations of the same cells).
 
-    .venv/bin/python examples/prototypes/nav_centred_search.py OUT.csv SWEEP[:RUNS] ... [--roots R1,R2]
+    .venv/bin/python examples/prototypes/nav_centred_search.py OUT.csv SWEEP[:RUNS[:METHODS]] ... [--roots R1,R2]
         [--methods tight-sbe,tight-dvl] [--workers 2]
     .venv/bin/python examples/prototypes/nav_centred_search.py --summary OUT.csv
 """
@@ -38,11 +38,13 @@ def with_second_square(scenario: Scenario) -> Scenario:
 
 def jobs(sweeps: list, roots: list | None, methods: list | None) -> list:
     """(group, cell name, scenario, root, run, methods) of every run of every distinct cell of ``sweeps``
-    ((group, path, runs)), once per root seed (the sweep's own when ``roots`` is None)."""
+    ((group, path, runs, methods or None)), once per root seed (the sweep's own when ``roots`` is None); the tight
+    methods the sweep names, only those of the sweep's own list (or else of ``methods``) when given."""
     out = []
-    for group, path, runs in sweeps:
+    for group, path, runs, own in sweeps:
         sweep = load_sweep(path)
-        tight = [m for m in sweep.spec.methods if m in TIGHT and (methods is None or m in methods)]
+        keep = own or methods
+        tight = [m for m in sweep.spec.methods if m in TIGHT and (keep is None or m in keep)]
         seen = set()
         for cell in sweep.cells:
             if cell.cell_id in seen or not tight:
@@ -98,16 +100,52 @@ def describe(label: str, g) -> tuple:
     return len(g), int(d0.sum()), int(d1.sum()), b, c, ci
 
 
+def rules(wide) -> None:
+    """docs/filters.md 17's four rules on the paired table: the test worlds are the groups named J..."""
+    group = wide.index.get_level_values("group")
+    sets = {"test worlds (J25-J56)": group.str.startswith("J"),
+            "fault-free guards (zhou2017, ci, monterey, multibeam)": group.isin(["zhou2017", "ci", "monterey",
+                                                                                  "multibeam"]),
+            "realism (world faults)": group == "realism", "monterey": group == "monterey"}
+    un, ff, re, mo = (describe(label, wide[mask]) for label, mask in sets.items())
+    print(f"R1 (test worlds, lost runs, p < 0.05): {'holds' if sign_test_p(un[3], un[4]) < 0.05 else 'fails'}")
+    print(f"R2 (guards: c <= b, fault-free and realism each): {'holds' if ff[4] <= ff[3] and re[4] <= re[3] else 'fails'}")
+    print(f"R3 (accuracy upper ends: fault-free <= +0.2 m, realism <= +1.0 m, test worlds <= +1.0 m): "
+          f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 and un[5][2] <= 1.0 else 'fails'}")
+    print(f"R4 (Monterey: 0 lost with the candidate): {'holds' if mo[2] == 0 else 'fails'}")
+
+
+def per_world(df) -> None:
+    """Per test world: lost runs of each arm, the largest final error, and issue 24's target on runs 0-9."""
+    df = df[df["group"].str.startswith("J")].copy()
+    df["diverged"] = df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])
+    print("\n| world | runs | lost, defaults | lost, candidate | largest final error (m), defaults / candidate | "
+          "target on runs 0-9, defaults / candidate |\n|---|---|---|---|---|---|")
+    for world, g in sorted(df.groupby("group"), key=lambda t: int(t[0][1:])):
+        cells = []
+        for arm in ("defaults", CANDIDATE):
+            a = g[g["arm"] == arm]
+            first = a[a["run"] < 10]
+            cells.append((int(a["diverged"].sum()), a["final_horizontal_error_m"].max(),
+                          "met" if first["diverged"].sum() <= 1 and first["final_horizontal_error_m"].max() <= 200.0
+                          else "missed"))
+        print(f"| {world} | {int((g['arm'] == 'defaults').sum())} | {cells[0][0]} | {cells[1][0]} | "
+              f"{cells[0][1]:.1f} / {cells[1][1]:.1f} | {cells[0][2]} / {cells[1][2]} |")
+
+
 def summary(path: str) -> None:
-    """Every group's pairs, then per method (the rules are docs/filters.md 17's, printed there)."""
+    """docs/filters.md 17's rules, every group's pairs, per method, per test world, and the lost runs."""
     import pandas as pd
 
     wide = paired(pd.read_csv(path))
+    rules(wide)
+    print()
     for group in wide.index.get_level_values("group").unique():
         describe(group, wide[wide.index.get_level_values("group") == group])
     for method in wide.index.get_level_values("method").unique():
         describe(f"  {method}, all groups", wide[wide.index.get_level_values("method") == method])
     df = pd.read_csv(path)
+    per_world(df)
     lost = df[df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])]
     print("\nlost runs (either arm): group, cell, root, run, method, arm, final error (m)")
     for r in lost.itertuples():
@@ -115,10 +153,13 @@ def summary(path: str) -> None:
 
 
 def _sweeps(args: list) -> list:
+    """SWEEP[:RUNS[:METHOD,METHOD]] arguments as (group, path, runs, methods or None)."""
     out = []
     for a in args:
-        path, _, runs = a.partition(":")
-        out.append((path.rsplit("/", 1)[-1].removesuffix(".yaml"), path, int(runs) if runs else 10))
+        path, _, rest = a.partition(":")
+        runs, _, own = rest.partition(":")
+        out.append((path.rsplit("/", 1)[-1].removesuffix(".yaml"), path, int(runs) if runs else 10,
+                    own.split(",") if own else None))
     return out
 
 
