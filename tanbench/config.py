@@ -519,7 +519,8 @@ class FilterSpec(_Strict):
     recovery_search_around: choices(RECOVERY_SEARCH_AROUND) = new_option(
         "estimate", description="global recovery: search the square around the diverged filter's estimate only, or, "
                                 "when that match is refused, a second square around the navigation solution "
-                                "(docs/filters.md 17) [estimate]")
+                                "(always, or only when the navigation solution lies outside the first square; "
+                                "docs/filters.md 17-18) [estimate]")
     # issue 24's accuracy study (docs/filters.md section 7): the likelihood's width
     range_noise: choices(RANGE_NOISE) = new_option(
         "table-2", description="every method's range (altitude) noise in the likelihood: Table 2's "

@@ -22,8 +22,8 @@ MAP_REPRESENTATION = ("slope", "bilinear")
 # where the tight filter re-draws a diverged cloud (filters/recovery.py; global: filters/relocalise.py)
 RECOVERY = {"estimate": 0, "last-healthy": 1, "global": 2}
 # where the global recovery searches: around the diverged filter's estimate only, or, when that match is refused,
-# also around the navigation solution (filters/relocalise.py)
-RECOVERY_SEARCH_AROUND = ("estimate", "estimate-then-navigation")
+# also around the navigation solution (always, or only when it lies outside the first square; filters/relocalise.py)
+RECOVERY_SEARCH_AROUND = ("estimate", "estimate-then-navigation", "estimate-then-distant-navigation")
 DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}
 LIKELIHOOD = {"student-t": 1, "gaussian": 0}  # beam density of the map-aware kernels (filters/likelihood.py)
 LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")

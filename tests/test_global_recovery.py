@@ -47,11 +47,13 @@ def _survey(k=80, turn_deg=17.0, start=(400.0, 350.0)):
     return truth, inc
 
 
-def _reloc(zmap, offsets, window, half_side=150.0, fix_std=10.0, span_deg=30.0, step_deg=2.0, nav_en=None):
+def _reloc(zmap, offsets, window, half_side=150.0, fix_std=10.0, span_deg=30.0, step_deg=2.0, nav_en=None,
+           nav_min_offset=0.0):
     res = 1.0 / zmap.inv_re
     return rl.Relocalise(offsets, zmap, rl.heading_candidates(math.radians(span_deg), math.radians(step_deg)),
                          int(math.ceil(half_side / res)), res, window, 1.0, fix_std,
-                         np.empty((0, 2)) if nav_en is None else np.ascontiguousarray(nav_en, dtype=np.float64))
+                         np.empty((0, 2)) if nav_en is None else np.ascontiguousarray(nav_en, dtype=np.float64),
+                         nav_min_offset)
 
 
 def test_heading_candidates():
@@ -194,6 +196,15 @@ def test_a_refused_match_around_the_estimate_is_tried_around_the_navigation_solu
                                   rl.relocalise(inc, up, k, near[0], near[1], alone))
     short = _reloc(zmap, offsets, 60, half_side=100.0, nav_en=nav[:k])  # no centre at this update: not tried
     assert not rl.relocalise_around(inc, up, k, far[0], far[1], short)[0]
+    # estimate-then-distant-navigation: the second square only for a navigation solution outside the first one
+    outside = _reloc(zmap, offsets, 60, half_side=100.0, nav_en=nav, nav_min_offset=100.0)
+    np.testing.assert_array_equal(rl.relocalise_around(inc, up, k, far[0], far[1], outside),
+                                  (found, east, north, _))  # 145 m east of the estimate: searched
+    assert rl.relocalise_around_numpy(inc, up, k, far[0], far[1], outside)[0]
+    near_far = truth[k] + [130.0, 20.0]  # the truth outside this square too, the navigation inside it (95 m west)
+    assert not rl.relocalise_around(inc, up, k, near_far[0], near_far[1], outside)[0]
+    assert not rl.relocalise_around_numpy(inc, up, k, near_far[0], near_far[1], outside)[0]
+    assert rl.relocalise_around(inc, up, k, near_far[0], near_far[1], both)[0]
 
 
 def test_the_second_square_is_an_option_with_a_neutral_default():
@@ -208,6 +219,10 @@ def test_the_second_square_is_an_option_with_a_neutral_default():
     np.testing.assert_array_equal(rl.global_search_of(second.filter, nav).nav_en, nav)
     no_search = Scenario(filter={"recovery": "estimate", "recovery_search_around": "estimate-then-navigation"})
     assert rl.global_search_of(no_search.filter, nav) is None
+    assert not rl.global_search_of(second.filter, nav).distant_only
+    distant = Scenario(filter={"recovery_search_around": "estimate-then-distant-navigation"})
+    search = rl.global_search_of(distant.filter, nav)
+    assert search.distant_only and search.nav_en is not None
 
 
 def test_global_is_the_default_and_estimate_its_neutral_value():

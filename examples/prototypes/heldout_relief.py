@@ -13,6 +13,7 @@ map, the survey) is tanbench's own options.
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --all      # J1-J24
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --unseen   # J25-J40 (section 10's test worlds)
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --section-17   # J41-J56 (section 17's)
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --section-18   # J57-J72 (section 18's)
     .venv/bin/tanbench run OUT_DIR/J1.yaml --out OUT_DIR/J1 --quiet --series none
     .venv/bin/python examples/prototypes/heldout_relief.py --summary RESULTS_DIR   # a table of RESULTS_DIR/J*/
 
@@ -52,6 +53,12 @@ UNSEEN_SETS = {
 SECTION_17_SETS = {
     "sixth": (41, ((0.4, 0.2), (0.6, 0.8), (0.2, 0.6), (0.8, 0.4)), 20.0, range(24240051, 24240059)),
     "seventh": (49, ((0.35, 0.65), (0.65, 0.35), (0.45, 0.85), (0.55, 0.2)), 28.0, range(24240059, 24240067)),
+}
+# the test worlds of docs/filters.md section 18 (the second square only beyond the first), fixed before any run on
+# them: other centres and two more scales (12 m and 36 m); `--section-18` builds them
+SECTION_18_SETS = {
+    "eighth": (57, ((0.3, 0.3), (0.7, 0.7), (0.3, 0.7), (0.7, 0.3)), 12.0, range(24240067, 24240075)),
+    "ninth": (65, ((0.5, 0.4), (0.5, 0.6), (0.4, 0.5), (0.6, 0.5)), 36.0, range(24240075, 24240083)),
 }
 
 
@@ -106,7 +113,7 @@ def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) ->
 def main(out: Path, which: str = "first") -> None:
     out.mkdir(parents=True, exist_ok=True)
     z, dx, dy = read_dem()
-    first, centres, spacing, seed_range = {**SETS, **UNSEEN_SETS, **SECTION_17_SETS}[which]
+    first, centres, spacing, seed_range = {**SETS, **UNSEEN_SETS, **SECTION_17_SETS, **SECTION_18_SETS}[which]
     scales = ((dx, dy), (spacing, spacing))
     seeds = iter(seed_range)
     k = first - 1
@@ -177,6 +184,9 @@ if __name__ == "__main__":
             main(Path(args[0]), which)
     elif len(args) == 2 and args[1] == "--section-17":
         for which in SECTION_17_SETS:
+            main(Path(args[0]), which)
+    elif len(args) == 2 and args[1] == "--section-18":
+        for which in SECTION_18_SETS:
             main(Path(args[0]), which)
     elif len(args) in (1, 2) and (len(args) == 1 or args[1] in ("--second", "--third")):
         main(Path(args[0]), args[1][2:] if len(args) == 2 else "first")

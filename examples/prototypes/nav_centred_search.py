@@ -8,7 +8,8 @@ again. ``--roots`` runs each sweep again with other root seeds (other realisatio
 
     .venv/bin/python examples/prototypes/nav_centred_search.py OUT.csv SWEEP[:RUNS[:METHODS]] ... [--roots R1,R2]
         [--methods tight-sbe,tight-dvl] [--workers 2]
-    .venv/bin/python examples/prototypes/nav_centred_search.py --summary OUT.csv
+    .venv/bin/python examples/prototypes/nav_centred_search.py --summary OUT.csv[,OUT2.csv]
+(``--distant``: section 18's candidate, ``estimate-then-distant-navigation``.)
 """
 
 from __future__ import annotations
@@ -30,9 +31,13 @@ FIELDS = ["group", "cell", "root", "run", "method", "arm", "copied", "diverged",
           "mean_horizontal_error_m", "reinitialisations", "recoveries", "filter_wall_s"]
 
 
+# the candidate's value of filter.recovery_search_around: section 17's, or section 18's (``--distant``)
+SEARCH_AROUND = {"value": "estimate-then-navigation"}
+
+
 def with_second_square(scenario: Scenario) -> Scenario:
     data = scenario.model_dump(mode="json")
-    data["filter"]["recovery_search_around"] = "estimate-then-navigation"
+    data["filter"]["recovery_search_around"] = SEARCH_AROUND["value"]
     return Scenario(**data)
 
 
@@ -101,9 +106,9 @@ def describe(label: str, g) -> tuple:
 
 
 def rules(wide) -> None:
-    """docs/filters.md 17's four rules on the paired table: the test worlds are the groups named J..."""
+    """docs/filters.md 17's four rules (section 18's too) on the paired table: the test worlds are the groups named J..."""
     group = wide.index.get_level_values("group")
-    sets = {"test worlds (J25-J56)": group.str.startswith("J"),
+    sets = {"test worlds (the J... groups)": group.str.startswith("J"),
             "fault-free guards (zhou2017, ci, monterey, multibeam)": group.isin(["zhou2017", "ci", "monterey",
                                                                                   "multibeam"]),
             "realism (world faults)": group == "realism", "monterey": group == "monterey"}
@@ -137,14 +142,14 @@ def summary(path: str) -> None:
     """docs/filters.md 17's rules, every group's pairs, per method, per test world, and the lost runs."""
     import pandas as pd
 
-    wide = paired(pd.read_csv(path))
+    df = pd.concat([pd.read_csv(p) for p in path.split(",")], ignore_index=True)  # CSVs of one test, comma-separated
+    wide = paired(df)
     rules(wide)
     print()
     for group in wide.index.get_level_values("group").unique():
         describe(group, wide[wide.index.get_level_values("group") == group])
     for method in wide.index.get_level_values("method").unique():
         describe(f"  {method}, all groups", wide[wide.index.get_level_values("method") == method])
-    df = pd.read_csv(path)
     per_world(df)
     lost = df[df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])]
     print("\nlost runs (either arm): group, cell, root, run, method, arm, final error (m)")
@@ -169,6 +174,9 @@ if __name__ == "__main__":
         summary(args[1])
         raise SystemExit(0)
     opts = {}
+    if "--distant" in args:
+        args.remove("--distant")
+        SEARCH_AROUND["value"] = "estimate-then-distant-navigation"
     for flag in ("--roots", "--methods", "--workers"):
         if flag in args:
             i = args.index(flag)

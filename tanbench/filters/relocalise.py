@@ -48,17 +48,19 @@ from tanbench.navigation.increments import D0E, D0N
 from tanbench.terrain.grid import MapArgs
 
 # the spec's side of the search (Python only): profile length in updates, half side of the
-# translation square (m), heading span and step (rad), the ambiguity test's std (m), and the
+# translation square (m), heading span and step (rad), the ambiguity test's std (m), the
 # navigation solution's east and north at the updates (K, 2) when a refused match around the
-# estimate is tried again around it (``filter.recovery_search_around``), else None
-GlobalSearch = namedtuple("GlobalSearch", "window half_side span step fix_std nav_en")
+# estimate is tried again around it (``filter.recovery_search_around``), else None, and whether
+# only a navigation solution outside the first square is searched around
+GlobalSearch = namedtuple("GlobalSearch", "window half_side span step fix_std nav_en distant_only")
 
 # what the jitted loop takes: the beams' navigation-frame vectors times ranges at every update
 # (K, m, 3; NaN without a range), the map (``MapArgs``), the heading candidates (D,), the search
 # square's half side in cells and its cell (m), the profile length, the altitude std of the
-# ambiguity test's likelihood and its position std threshold, and the second search's centres at
-# the updates (K, 2; no rows: no second search)
-Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step window sig_u fix_std nav_en")
+# ambiguity test's likelihood and its position std threshold, the second search's centres at
+# the updates (K, 2; no rows: no second search), and the least offset (m, on either axis) of a
+# centre from the estimate for it to be searched (0: always; the square's half side: outside it)
+Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step window sig_u fix_std nav_en nav_min_offset")
 
 # refinement around the best coarse candidate: +-FINE_CELLS steps of a fifth of the map spacing (as TERCOM's)
 FINE_CELLS = 5
@@ -75,10 +77,11 @@ def global_search_of(f, nav_en=None):
     updates (K, 2), kept when ``f.recovery_search_around`` asks for the second search around it."""
     if f.recovery != "global":
         return None
-    second = f.recovery_search_around == "estimate-then-navigation" and nav_en is not None
+    second = f.recovery_search_around != "estimate" and nav_en is not None
     return GlobalSearch(int(f.recovery_profile_updates), f.recovery_max_side_m / 2.0,
                         math.radians(f.recovery_heading_span_deg), math.radians(f.recovery_heading_step_deg),
-                        float(f.recovery_fix_std_m), np.ascontiguousarray(nav_en, dtype=np.float64) if second else None)
+                        float(f.recovery_fix_std_m), np.ascontiguousarray(nav_en, dtype=np.float64) if second else None,
+                        f.recovery_search_around == "estimate-then-distant-navigation")
 
 
 def heading_candidates(span, step) -> np.ndarray:
@@ -100,9 +103,10 @@ def relocaliser(search: GlobalSearch, track, beams, ranges, grid, sig_u: float) 
     zmap = map_of_grid(grid)
     res = 1.0 / min(zmap.inv_re, zmap.inv_rn)
     nav_en = search.nav_en if search.nav_en is not None else np.empty((0, 2))
-    return Relocalise(offsets, zmap, heading_candidates(search.span, search.step),
-                      int(math.ceil(search.half_side / res)), float(res), int(search.window), float(sig_u),
-                      float(search.fix_std), nav_en)
+    half_cells = int(math.ceil(search.half_side / res))
+    return Relocalise(offsets, zmap, heading_candidates(search.span, search.step), half_cells, float(res),
+                      int(search.window), float(sig_u), float(search.fix_std), nav_en,
+                      half_cells * float(res) if search.distant_only else 0.0)
 
 
 @nb.njit(cache=True)
@@ -326,17 +330,24 @@ def relocalise_around(inc, up, k, est_e, est_n, reloc):
     """:func:`relocalise` around the diverged filter's estimate; when that match is refused and
     ``reloc.nav_en`` holds the navigation solution at update ``k``, again around it (a filter that
     followed a wrong path may have left the vehicle farther behind than half the square, while the
-    navigation solution drifts only with its own errors; docs/filters.md 17). Same returns."""
+    navigation solution drifts only with its own errors; docs/filters.md 17), if it lies at least
+    ``reloc.nav_min_offset`` from the estimate on either axis (section 18: outside the first square).
+    Same returns."""
     found, east, north, delta = relocalise(inc, up, k, est_e, est_n, reloc)
     if found or k >= reloc.nav_en.shape[0]:
         return found, east, north, delta
-    return relocalise(inc, up, k, reloc.nav_en[k, 0], reloc.nav_en[k, 1], reloc)
+    nav_e, nav_n = reloc.nav_en[k, 0], reloc.nav_en[k, 1]
+    if max(abs(nav_e - est_e), abs(nav_n - est_n)) < reloc.nav_min_offset:
+        return found, east, north, delta
+    return relocalise(inc, up, k, nav_e, nav_n, reloc)
 
 
 def relocalise_around_numpy(inc, up, k, est_e, est_n, reloc):
     """Plain-Python reference of :func:`relocalise_around`: the jitted profile of each centre, matched by
     :func:`global_match_numpy`."""
-    centres = [(est_e, est_n)] + ([tuple(reloc.nav_en[k])] if k < reloc.nav_en.shape[0] else [])
+    distant = k < reloc.nav_en.shape[0] and max(abs(reloc.nav_en[k, 0] - est_e),
+                                                 abs(reloc.nav_en[k, 1] - est_n)) >= reloc.nav_min_offset
+    centres = [(est_e, est_n)] + ([tuple(reloc.nav_en[k])] if distant else [])
     answer = (False, est_e, est_n, 0.0)
     for ce, cn in centres:
         updates = min(k + 1, reloc.window)
