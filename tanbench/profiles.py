@@ -42,6 +42,7 @@ PROFILES: dict[str, dict[str, tuple[object, str]]] = {
         "filter.keep_on_map": (False, "the paper describes no bound on the estimate"),
         "filter.divergence_spread_m": (None, "the paper describes no divergence test"),
         "filter.recovery": ("estimate", "the paper describes no divergence test"),
+        "filter.recovery_search_around": ("estimate", "the paper describes no divergence test"),
         "filter.gyro_bias_noise": ("none", "Table 2: no process noise on the gyro biases"),
         "filter.loose_heading_offsets": (False, "Section 2's loose TAN: a position-only particle filter"),
         "filter.loose_bias_gate_sigma": (None, "the paper gates no fix"),

@@ -16,7 +16,7 @@ scenario:
   sampling_time_s: 1
   particles: 1000
   duration_s: 400
-  filter: {{loose_fix_correlation_s: 0}}
+  filter: {{loose_fix_correlation_s: 0, recovery_search_around: estimate}}
 {extra}
 """
 RUNS = 40
@@ -33,12 +33,12 @@ MUTATIONS = {
     # the rare 5-10 % case needs the CI design's 240 runs per method (docs/results.md); here a quarter
     "25 % of runs start 300 m off": ("  faults: {far_start_fraction: 0.25}", ("faults.far_start_fraction",)),
     "fewer particles (1000 -> 100)": ("  particles: 100", ("particles",)),
-    "regularisation switched off": ("  filter: {regularisation: none, loose_fix_correlation_s: 0}",
+    "regularisation switched off": ("  filter: {regularisation: none, loose_fix_correlation_s: 0, recovery_search_around: estimate}",
                                     ("filter.regularisation",)),
 }
 # reseeds of the unmodified code: must not be flagged
 NULLS = {
-    "filter random numbers reseeded": ("  filter: {random_numbers: numpy, loose_fix_correlation_s: 0}",
+    "filter random numbers reseeded": ("  filter: {random_numbers: numpy, loose_fix_correlation_s: 0, recovery_search_around: estimate}",
                                        ("filter.random_numbers",)),
 }
 

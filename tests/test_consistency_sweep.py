@@ -31,7 +31,8 @@ methods: [tight-dvl]
 # this cell's verdict moves with the seeds, so the test checks the rule on the pinned realisation, not the filter)
 scenario: {particles: 2000, duration_s: 300, filter: {map_aware_likelihood: false, likelihood: gaussian,
                                                       loose_reopen_heading: navigation, loose_reopen_position: prior,
-                                                      loose_fix_correlation_s: 0}}
+                                                      loose_fix_correlation_s: 0,
+                                                      recovery_search_around: estimate}}
 tables:
   noise_model: {filter.measurement_noise_altitude_m: [1.0, 0.05]}
 """

@@ -207,15 +207,21 @@ def test_a_refused_match_around_the_estimate_is_tried_around_the_navigation_solu
     assert rl.relocalise_around(inc, up, k, near_far[0], near_far[1], both)[0]
 
 
-def test_the_second_square_is_an_option_with_a_neutral_default():
-    """``estimate`` leaves every cell key as it was and the search bundle without navigation centres;
-    ``estimate-then-navigation`` keeps the navigation solution the method passes."""
+def test_the_second_square_is_an_option_with_a_neutral_value():
+    """``estimate`` (the neutral value, the literal profile's) leaves every cell key as it was before the option and
+    the search bundle without navigation centres; ``estimate-then-navigation`` and the default since docs/filters.md
+    18.1, ``estimate-then-distant-navigation``, keep the navigation solution the method passes."""
+    from tanbench.profiles import profile_settings
+
     nav = np.arange(20.0).reshape(10, 2)
-    assert Scenario().filter.recovery_search_around == "estimate"
-    assert Scenario().cell_key() == Scenario(filter={"recovery_search_around": "estimate"}).cell_key()
+    neutral = Scenario(filter={"recovery_search_around": "estimate"})
+    assert Scenario().filter.recovery_search_around == "estimate-then-distant-navigation"
+    assert "recovery_search_around" not in str(neutral.identity())
+    assert neutral.cell_key() != Scenario().cell_key()
+    assert profile_settings("zhou2017-literal")["filter.recovery_search_around"] == "estimate"
     second = Scenario(filter={"recovery_search_around": "estimate-then-navigation"})
-    assert second.cell_key() != Scenario().cell_key()
-    assert rl.global_search_of(Scenario().filter, nav).nav_en is None
+    assert second.cell_key() != Scenario().cell_key() != neutral.cell_key()
+    assert rl.global_search_of(neutral.filter, nav).nav_en is None
     np.testing.assert_array_equal(rl.global_search_of(second.filter, nav).nav_en, nav)
     no_search = Scenario(filter={"recovery": "estimate", "recovery_search_around": "estimate-then-navigation"})
     assert rl.global_search_of(no_search.filter, nav) is None

@@ -55,6 +55,7 @@ def as_tested(scenario: Scenario) -> Scenario:
     data["filter"]["loose_reopen_heading"] = "navigation"  # neutral; the default since section 14.2
     data["filter"]["loose_reopen_position"] = "prior"  # neutral; the default since section 15.1
     data["filter"]["loose_fix_correlation_s"] = 0.0  # neutral; the default since section 16.3
+    data["filter"]["recovery_search_around"] = "estimate"  # neutral; the default since section 18.1
     return Scenario(**data)
 
 

@@ -60,8 +60,17 @@ def jobs(sweeps: list, roots: list | None, methods: list | None) -> list:
     return out
 
 
+def as_run_for_sections_17_18(scenario: Scenario) -> Scenario:
+    """The defaults sections 17 and 18 ran against: ``recovery_search_around: estimate`` (neutral; the default since
+    section 18.1), so the pairs keep their keys and seeds."""
+    data = scenario.model_dump(mode="json")
+    data["filter"]["recovery_search_around"] = "estimate"
+    return Scenario(**data)
+
+
 def _pair(job):
     group, name, scenario, root, run, methods = job
+    scenario = as_run_for_sections_17_18(scenario)
     vehicle = simulate_vehicle(scenario, keyed_vehicle_seed(root, scenario.pairing_key(), run))
     rows = []
     for method in methods:
