@@ -110,6 +110,10 @@ def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) ->
     }
 
 
+# the flags that build a group of sets
+GROUPS = {"--all": SETS, "--unseen": UNSEEN_SETS, "--section-17": SECTION_17_SETS, "--section-18": SECTION_18_SETS}
+
+
 def main(out: Path, which: str = "first") -> None:
     out.mkdir(parents=True, exist_ok=True)
     z, dx, dy = read_dem()
@@ -176,17 +180,8 @@ if __name__ == "__main__":
     args = sys.argv[1:]
     if len(args) == 2 and args[0] == "--summary":
         print(summary(Path(args[1])), end="")
-    elif len(args) == 2 and args[1] == "--all":
-        for which in SETS:
-            main(Path(args[0]), which)
-    elif len(args) == 2 and args[1] == "--unseen":
-        for which in UNSEEN_SETS:
-            main(Path(args[0]), which)
-    elif len(args) == 2 and args[1] == "--section-17":
-        for which in SECTION_17_SETS:
-            main(Path(args[0]), which)
-    elif len(args) == 2 and args[1] == "--section-18":
-        for which in SECTION_18_SETS:
+    elif len(args) == 2 and args[1] in GROUPS:  # a flag naming a group of sets: each of them
+        for which in GROUPS[args[1]]:
             main(Path(args[0]), which)
     elif len(args) in (1, 2) and (len(args) == 1 or args[1] in ("--second", "--third")):
         main(Path(args[0]), args[1][2:] if len(args) == 2 else "first")
