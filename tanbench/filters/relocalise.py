@@ -342,24 +342,24 @@ def relocalise_around(inc, up, k, est_e, est_n, reloc):
     return relocalise(inc, up, k, nav_e, nav_n, reloc)
 
 
-def relocalise_around_numpy(inc, up, k, est_e, est_n, reloc):
-    """Plain-Python reference of :func:`relocalise_around`: the jitted profile of each centre, matched by
+def relocalise_numpy(inc, up, k, centre_e, centre_n, reloc):
+    """Plain-numpy reference of :func:`relocalise`: the profile by :func:`relative_profile_numpy`, the match by
     :func:`global_match_numpy`."""
-    distant = k < reloc.nav_en.shape[0] and max(abs(reloc.nav_en[k, 0] - est_e),
-                                                 abs(reloc.nav_en[k, 1] - est_n)) >= reloc.nav_min_offset
-    centres = [(est_e, est_n)] + ([tuple(reloc.nav_en[k])] if distant else [])
-    answer = (False, est_e, est_n, 0.0)
-    for ce, cn in centres:
-        updates = min(k + 1, reloc.window)
-        if updates < min(MIN_UPDATES, reloc.window):
-            return False, ce, cn, 0.0
-        cap = updates * reloc.offsets.shape[1]
-        pe, pn, ph = np.empty(cap), np.empty(cap), np.empty(cap)
-        npts = relative_profile(inc, reloc.offsets, up, k, updates, pe, pn, ph)
-        if 2 * npts < updates:
-            answer = (False, ce, cn, 0.0)
-            continue
-        answer = global_match_numpy(pe[:npts], pn[:npts], ph[:npts], ce, cn, min(npts, updates), reloc)
-        if answer[0]:
-            return answer
-    return answer
+    updates = min(k + 1, reloc.window)
+    if updates < min(MIN_UPDATES, reloc.window):
+        return False, centre_e, centre_n, 0.0
+    pe, pn, ph = relative_profile_numpy(inc, reloc.offsets, up, k, updates)
+    if 2 * pe.size < updates:
+        return False, centre_e, centre_n, 0.0
+    return global_match_numpy(pe, pn, ph, centre_e, centre_n, min(pe.size, updates), reloc)
+
+
+def relocalise_around_numpy(inc, up, k, est_e, est_n, reloc):
+    """Plain-numpy reference of :func:`relocalise_around`."""
+    answer = relocalise_numpy(inc, up, k, est_e, est_n, reloc)
+    if answer[0] or k >= reloc.nav_en.shape[0]:
+        return answer
+    nav_e, nav_n = reloc.nav_en[k]
+    if max(abs(nav_e - est_e), abs(nav_n - est_n)) < reloc.nav_min_offset:
+        return answer
+    return relocalise_numpy(inc, up, k, nav_e, nav_n, reloc)
