@@ -517,10 +517,11 @@ class FilterSpec(_Strict):
         10.0, gt=0, description="global recovery: a match whose likelihood std (TERCOM's ambiguity test) is above "
                                 "this is not used (the built-in re-draw instead)")
     recovery_search_around: choices(RECOVERY_SEARCH_AROUND) = new_option(
-        "estimate-then-distant-navigation", neutral="estimate", description="global recovery: search the square around the diverged filter's estimate only, or, "
-                                "when that match is refused, a second square around the navigation solution "
-                                "(always, or only when the navigation solution lies outside the first square; "
-                                "the default since docs/filters.md 18.1) [estimate]")
+        "estimate-then-distant-navigation", neutral="estimate",
+        description="global recovery: search the square around the diverged filter's estimate only, or, when that "
+                    "match is refused, a second square around the navigation solution (always, or only when the "
+                    "navigation solution lies outside the first square; the default since docs/filters.md 18.1) "
+                    "[estimate]")
     # issue 24's accuracy study (docs/filters.md section 7): the likelihood's width
     range_noise: choices(RANGE_NOISE) = new_option(
         "table-2", description="every method's range (altitude) noise in the likelihood: Table 2's "

@@ -22,7 +22,7 @@ import sys
 import numpy as np
 
 from global_recovery import distinct_cells
-from loose_fix_gate import _t_interval, sign_test_p, write_rows
+from loose_fix_gate import LATER_NEUTRAL, _t_interval, sign_test_p, write_rows
 from tanbench.config import Scenario
 from tanbench.methods import get, run_method
 from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
@@ -54,8 +54,7 @@ def as_tested(scenario: Scenario) -> Scenario:
     data["filter"]["loose_fix_fit_one_wild_beam"] = False
     data["filter"]["loose_reopen_heading"] = "navigation"  # neutral; the default since section 14.2
     data["filter"]["loose_reopen_position"] = "prior"  # neutral; the default since section 15.1
-    data["filter"]["loose_fix_correlation_s"] = 0.0  # neutral; the default since section 16.3
-    data["filter"]["recovery_search_around"] = "estimate"  # neutral; the default since section 18.1
+    data["filter"].update(LATER_NEUTRAL)  # neutral; the defaults since sections 16.3 and 18.1
     return Scenario(**data)
 
 

@@ -115,7 +115,8 @@ def describe(label: str, g) -> tuple:
 
 
 def rules(wide) -> None:
-    """docs/filters.md 17's four rules (section 18's too) on the paired table: the test worlds are the groups named J..."""
+    """docs/filters.md 17's four rules (section 18's too) on the paired table; the test worlds are the groups
+    named J..."""
     group = wide.index.get_level_values("group")
     sets = {"test worlds (the J... groups)": group.str.startswith("J"),
             "fault-free guards (zhou2017, ci, monterey, multibeam)": group.isin(["zhou2017", "ci", "monterey",
@@ -123,7 +124,8 @@ def rules(wide) -> None:
             "realism (world faults)": group == "realism", "monterey": group == "monterey"}
     un, ff, re, mo = (describe(label, wide[mask]) for label, mask in sets.items())
     print(f"R1 (test worlds, lost runs, p < 0.05): {'holds' if sign_test_p(un[3], un[4]) < 0.05 else 'fails'}")
-    print(f"R2 (guards: c <= b, fault-free and realism each): {'holds' if ff[4] <= ff[3] and re[4] <= re[3] else 'fails'}")
+    r2 = ff[4] <= ff[3] and re[4] <= re[3]
+    print(f"R2 (guards: c <= b, fault-free and realism each): {'holds' if r2 else 'fails'}")
     print(f"R3 (accuracy upper ends: fault-free <= +0.2 m, realism <= +1.0 m, test worlds <= +1.0 m): "
           f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 and un[5][2] <= 1.0 else 'fails'}")
     print(f"R4 (Monterey: 0 lost with the candidate): {'holds' if mo[2] == 0 else 'fails'}")
