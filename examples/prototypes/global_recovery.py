@@ -86,6 +86,43 @@ def run(out_csv: str, workers: int) -> None:
     summary(out_csv)
 
 
+def describe_pairs(label: str, g, arm: str) -> tuple:
+    """Print the paired outcome of ``g`` (a wide table: metric, arm columns), the candidate arm named ``arm``;
+    returns (pairs, lost at the defaults, lost with ``arm``, b, c, (mean, low, high) of the final-error difference
+    over the pairs kept in both)."""
+    d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", arm)].astype(bool)
+    b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
+    kept = g[~d0 & ~d1]
+    diff = (kept[("final_horizontal_error_m", arm)] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
+    ci = _t_interval(diff) if diff.size > 1 and diff.std() > 0 else (float(diff.mean()) if diff.size else 0.0,) * 3
+    wall = g[("filter_wall_s", arm)].sum() / g[("filter_wall_s", "defaults")].sum()
+    print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with {arm} {int(d1.sum())}; "
+          f"discordant b = {b} (defaults only), c = {c} ({arm} only); one-sided sign test p = "
+          f"{sign_test_p(b, c):.4f}; final error {arm} - defaults {ci[0]:+.3f} m [{ci[1]:+.3f}, {ci[2]:+.3f}] "
+          f"({diff.size} kept in both); reinitialisations {int(g[('reinitialisations', 'defaults')].sum())} / "
+          f"{int(g[('reinitialisations', arm)].sum())}; filter time x{wall:.2f}")
+    return len(g), int(d0.sum()), int(d1.sum()), b, c, ci
+
+
+def four_rules(wide, test_label: str, test_mask, test_name: str, arm: str) -> None:
+    """Section 10's four rules (sections 17 and 18 use them unchanged) on the wide paired table: the test worlds
+    (``test_mask``, printed as ``test_label`` and, in the rules, ``test_name``), the fault-free guards, realism and
+    Monterey, the candidate arm named ``arm``."""
+    group = wide.index.get_level_values("group")
+    sets = {test_label: test_mask,
+            "fault-free guards (zhou2017, ci, monterey, multibeam)": group.isin(["zhou2017", "ci", "monterey",
+                                                                                  "multibeam"]),
+            "realism (world faults)": group == "realism", "monterey": group == "monterey"}
+    un, ff, re, mo = (describe_pairs(label, wide[mask], arm) for label, mask in sets.items())
+    print(f"R1 ({test_name} worlds, lost runs, p < 0.05): "
+          f"{'holds' if sign_test_p(un[3], un[4]) < 0.05 else 'fails'}")
+    r2 = ff[4] <= ff[3] and re[4] <= re[3]
+    print(f"R2 (guards: c <= b, fault-free and realism each): {'holds' if r2 else 'fails'}")
+    print(f"R3 (accuracy upper bounds: fault-free <= +0.2 m, realism <= +1.0 m, {test_name} <= +1.0 m): "
+          f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 and un[5][2] <= 1.0 else 'fails'}")
+    print(f"R4 (Monterey: 0 lost with {arm}): {'holds' if mo[2] == 0 else 'fails'}")
+
+
 def summary(path: str) -> None:
     """Section 10's rules on the CSV of :func:`run`."""
     import pandas as pd
@@ -96,32 +133,7 @@ def summary(path: str) -> None:
                           values=["diverged", "final_horizontal_error_m", "reinitialisations", "filter_wall_s"],
                           aggfunc="first")
     group = wide.index.get_level_values("group")
-    sets = {"unseen worlds J25-J40": group == "unseen",
-            "fault-free guards (zhou2017, ci, monterey, multibeam)": group.isin(["zhou2017", "ci", "monterey",
-                                                                                  "multibeam"]),
-            "realism (world faults)": group == "realism", "monterey": group == "monterey"}
-    out = {}
-    for label, mask in sets.items():
-        g = wide[mask]
-        d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", "global")].astype(bool)
-        b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
-        kept = g[~d0 & ~d1]
-        diff = (kept[("final_horizontal_error_m", "global")] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
-        ci = _t_interval(diff) if diff.size > 1 and diff.std() > 0 else (float(diff.mean()) if diff.size else 0.0,) * 3
-        out[label] = (len(g), int(d0.sum()), int(d1.sum()), b, c, ci)
-        wall = g[("filter_wall_s", "global")].sum() / g[("filter_wall_s", "defaults")].sum()
-        print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with global {int(d1.sum())}; "
-              f"discordant b = {b} (defaults only), c = {c} (global only); one-sided sign test p = "
-              f"{sign_test_p(b, c):.4f}; final error global - defaults {ci[0]:+.3f} m [{ci[1]:+.3f}, {ci[2]:+.3f}] "
-              f"({diff.size} kept in both); reinitialisations {int(g[('reinitialisations', 'defaults')].sum())} / "
-              f"{int(g[('reinitialisations', 'global')].sum())}; filter time x{wall:.2f}")
-    un, ff, re, mo = (out[k] for k in sets)
-    print(f"R1 (unseen worlds, lost runs, p < 0.05): "
-          f"{'holds' if sign_test_p(un[3], un[4]) < 0.05 else 'fails'}")
-    print(f"R2 (guards: c <= b, fault-free and realism each): {'holds' if ff[4] <= ff[3] and re[4] <= re[3] else 'fails'}")
-    print(f"R3 (accuracy upper bounds: fault-free <= +0.2 m, realism <= +1.0 m, unseen <= +1.0 m): "
-          f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 and un[5][2] <= 1.0 else 'fails'}")
-    print(f"R4 (Monterey: 0 lost with global): {'holds' if mo[2] == 0 else 'fails'}")
+    four_rules(wide, "unseen worlds J25-J40", group == "unseen", "unseen", "global")
     print("\nissue 24's real-relief target on the unseen worlds (at most tight-dvl 0, tight-sbe 1 lost of 10; "
           "no final error above 200 m), lost / largest final error:")
     u = df[df["group"] == "unseen"]

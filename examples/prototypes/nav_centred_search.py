@@ -18,8 +18,8 @@ import sys
 
 import numpy as np
 
-from global_recovery import TIGHT
-from loose_fix_gate import _t_interval, sign_test_p, write_rows
+from global_recovery import TIGHT, describe_pairs, four_rules
+from loose_fix_gate import write_rows
 from tanbench.config import Scenario
 from tanbench.methods import get, run_method
 from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
@@ -98,37 +98,11 @@ def paired(df):
                           aggfunc="first").pipe(pd.DataFrame)
 
 
-def describe(label: str, g) -> tuple:
-    """(pairs, lost defaults, lost candidate, b, c, (mean, low, high) of the kept pairs' final-error difference)."""
-    d0, d1 = g[("diverged", "defaults")].astype(bool), g[("diverged", CANDIDATE)].astype(bool)
-    b, c = int((d0 & ~d1).sum()), int((~d0 & d1).sum())
-    kept = g[~d0 & ~d1]
-    diff = (kept[("final_horizontal_error_m", CANDIDATE)] - kept[("final_horizontal_error_m", "defaults")]).to_numpy()
-    ci = _t_interval(diff) if diff.size > 1 and diff.std() > 0 else (float(diff.mean()) if diff.size else 0.0,) * 3
-    wall = g[("filter_wall_s", CANDIDATE)].sum() / g[("filter_wall_s", "defaults")].sum()
-    print(f"{label}: {len(g)} pairs; lost at the defaults {int(d0.sum())}, with the second square {int(d1.sum())}; "
-          f"b = {b} (defaults only), c = {c} (candidate only); one-sided sign test p = {sign_test_p(b, c):.4f}; "
-          f"final error candidate - defaults {ci[0]:+.3f} m [{ci[1]:+.3f}, {ci[2]:+.3f}] ({diff.size} kept in both); "
-          f"reinitialisations {int(g[('reinitialisations', 'defaults')].sum())} / "
-          f"{int(g[('reinitialisations', CANDIDATE)].sum())}; filter time x{wall:.2f}")
-    return len(g), int(d0.sum()), int(d1.sum()), b, c, ci
-
-
 def rules(wide) -> None:
-    """docs/filters.md 17's four rules (section 18's too) on the paired table; the test worlds are the groups
-    named J..."""
+    """docs/filters.md 17's four rules (section 18's too: section 10's) on the paired table; the test worlds are the
+    groups named J..."""
     group = wide.index.get_level_values("group")
-    sets = {"test worlds (the J... groups)": group.str.startswith("J"),
-            "fault-free guards (zhou2017, ci, monterey, multibeam)": group.isin(["zhou2017", "ci", "monterey",
-                                                                                  "multibeam"]),
-            "realism (world faults)": group == "realism", "monterey": group == "monterey"}
-    un, ff, re, mo = (describe(label, wide[mask]) for label, mask in sets.items())
-    print(f"R1 (test worlds, lost runs, p < 0.05): {'holds' if sign_test_p(un[3], un[4]) < 0.05 else 'fails'}")
-    r2 = ff[4] <= ff[3] and re[4] <= re[3]
-    print(f"R2 (guards: c <= b, fault-free and realism each): {'holds' if r2 else 'fails'}")
-    print(f"R3 (accuracy upper ends: fault-free <= +0.2 m, realism <= +1.0 m, test worlds <= +1.0 m): "
-          f"{'holds' if ff[5][2] <= 0.2 and re[5][2] <= 1.0 and un[5][2] <= 1.0 else 'fails'}")
-    print(f"R4 (Monterey: 0 lost with the candidate): {'holds' if mo[2] == 0 else 'fails'}")
+    four_rules(wide, "test worlds (the J... groups)", group.str.startswith("J"), "test", CANDIDATE)
 
 
 def per_world(df) -> None:
@@ -158,9 +132,9 @@ def summary(path: str) -> None:
     rules(wide)
     print()
     for group in wide.index.get_level_values("group").unique():
-        describe(group, wide[wide.index.get_level_values("group") == group])
+        describe_pairs(group, wide[wide.index.get_level_values("group") == group], CANDIDATE)
     for method in wide.index.get_level_values("method").unique():
-        describe(f"  {method}, all groups", wide[wide.index.get_level_values("method") == method])
+        describe_pairs(f"  {method}, all groups", wide[wide.index.get_level_values("method") == method], CANDIDATE)
     per_world(df)
     lost = df[df["diverged"].astype(str).str.lower().isin(["true", "1", "1.0"])]
     print("\nlost runs (either arm): group, cell, root, run, method, arm, final error (m)")
