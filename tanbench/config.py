@@ -34,7 +34,8 @@ from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NO
                               LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK,
                               LOOSE_REOPEN_HEADING, LOOSE_REOPEN_POSITION, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
                               POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, RECOVERY_SEARCH_AROUND,
-                              REGULARISATION, REGULARISED_STATES, RESAMPLING, TIGHT_REGULARISATION, choices)
+                              RECOVERY_SECOND_AMBIGUITY, REGULARISATION, REGULARISED_STATES, RESAMPLING,
+                              TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
@@ -522,6 +523,11 @@ class FilterSpec(_Strict):
                     "match is refused, a second square around the navigation solution (always, or only when the "
                     "navigation solution lies outside the first square; the default since docs/filters.md 18.1) "
                     "[estimate]")
+    recovery_second_ambiguity: choices(RECOVERY_SECOND_AMBIGUITY) = new_option(
+        "its-square",
+        description="global recovery, second square: TERCOM's ambiguity test of a match around the navigation solution "
+                    "weighs that square's candidates only, or both squares' (a candidate in the first square as good "
+                    "as the match makes it ambiguous; docs/filters.md 19) [its-square]")
     # issue 24's accuracy study (docs/filters.md section 7): the likelihood's width
     range_noise: choices(RANGE_NOISE) = new_option(
         "table-2", description="every method's range (altitude) noise in the likelihood: Table 2's "

@@ -24,6 +24,8 @@ RECOVERY = {"estimate": 0, "last-healthy": 1, "global": 2}
 # where the global recovery searches: around the diverged filter's estimate only, or, when that match is refused,
 # also around the navigation solution (always, or only when it lies outside the first square; filters/relocalise.py)
 RECOVERY_SEARCH_AROUND = ("estimate", "estimate-then-navigation", "estimate-then-distant-navigation")
+# the candidates a second square's match must stand out from (filters/relocalise.py; docs/filters.md 19)
+RECOVERY_SECOND_AMBIGUITY = ("its-square", "both-squares")
 DISTANCE_INNOVATION = {"none": 0, "particle": 1, "navigation": 2}
 LIKELIHOOD = {"student-t": 1, "gaussian": 0}  # beam density of the map-aware kernels (filters/likelihood.py)
 LOOSE_ARCHITECTURE = ("kalman-feedback", "fix-only")

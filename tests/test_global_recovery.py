@@ -16,6 +16,7 @@ import pytest
 from filters_support import short_scenario
 from tanbench.config import Scenario
 from tanbench.filters import relocalise as rl
+from tanbench.filters.tercom import surface_likelihood_moments_numpy
 from tanbench.navigation.increments import D0E, D0N, N_INCREMENTS
 from tanbench.terrain.grid import MapArgs, bilinear_numpy
 
@@ -48,12 +49,12 @@ def _survey(k=80, turn_deg=17.0, start=(400.0, 350.0)):
 
 
 def _reloc(zmap, offsets, window, half_side=150.0, fix_std=10.0, span_deg=30.0, step_deg=2.0, nav_en=None,
-           nav_min_offset=0.0):
+           nav_min_offset=0.0, both_squares=False):
     res = 1.0 / zmap.inv_re
     return rl.Relocalise(offsets, zmap, rl.heading_candidates(math.radians(span_deg), math.radians(step_deg)),
                          int(math.ceil(half_side / res)), res, window, 1.0, fix_std,
                          np.empty((0, 2)) if nav_en is None else np.ascontiguousarray(nav_en, dtype=np.float64),
-                         nav_min_offset)
+                         nav_min_offset, both_squares)
 
 
 def test_heading_candidates():
@@ -205,6 +206,57 @@ def test_a_refused_match_around_the_estimate_is_tried_around_the_navigation_solu
     assert not rl.relocalise_around(inc, up, k, near_far[0], near_far[1], outside)[0]
     assert not rl.relocalise_around_numpy(inc, up, k, near_far[0], near_far[1], outside)[0]
     assert rl.relocalise_around(inc, up, k, near_far[0], near_far[1], both)[0]
+
+
+def test_both_squares_std_matches_numpy_and_sees_a_rival_in_the_first_square():
+    """``both_squares_std``: the ambiguity statistic over two squares' coarse surfaces equals its numpy reference; a
+    first square without a competitive candidate leaves the second square's own std, a candidate in it as good as the
+    second square's best makes the pair ambiguous (about half the distance between the two), and candidates of the
+    second square inside the first are counted once."""
+    rng = np.random.default_rng(11)
+    half, step, pings, sig_u = 6, 10.0, 200, 1.0
+    side = 2 * half + 1
+    second = 1.0 + rng.random((3, side, side))
+    second[1, half + 1, half - 2] = 0.2  # one clear minimum
+    second[0, 0, 0] = np.inf
+    flat = np.full((3, side, side), 5.0)
+    args = (half, step, pings, sig_u)
+    own = rl.both_squares_std(flat, 0.0, 0.0, second, 500.0, 300.0, *args)
+    moments = surface_likelihood_moments_numpy(second, np.zeros(3), half, step, pings, sig_u)
+    assert own == pytest.approx(math.sqrt(max(moments[2], moments[3])), abs=1e-9)
+    rival = flat.copy()
+    rival[2, half, half] = 0.2  # as good as the second square's best, 583 m away
+    both = rl.both_squares_std(rival, 0.0, 0.0, second, 500.0, 300.0, *args)
+    assert both > 200.0
+    for first, e2, n2 in ((flat, 500.0, 300.0), (rival, 500.0, 300.0), (rival, 40.0, -30.0), (second, 20.0, 0.0)):
+        np.testing.assert_allclose(rl.both_squares_std(first, 0.0, 0.0, second, e2, n2, *args),
+                                   rl.both_squares_std_numpy(first, 0.0, 0.0, second, e2, n2, *args), rtol=1e-9)
+    # the second square inside the first (same centre): only the first square's candidates count
+    assert rl.both_squares_std(rival, 0.0, 0.0, second, 0.0, 0.0, *args) == pytest.approx(
+        rl.both_squares_std(rival, 0.0, 0.0, flat, 5000.0, 5000.0, *args), abs=1e-9)
+
+
+def test_a_second_square_match_without_a_rival_is_kept_with_both_squares():
+    """``recovery_second_ambiguity: both-squares`` keeps section 17's rescue when the first square holds nothing as
+    good (the truth outside it), jitted and numpy alike; its neutral value ``its-square`` leaves the cell key and the
+    search bundle as they were."""
+    zmap = _toy_map()
+    truth, inc, offsets, up = _single_beam_case(zmap, noise=0.3)
+    k = 79
+    far = truth[k] + [180.0, -160.0]
+    nav = np.tile(truth[k] + [35.0, 25.0], (k + 1, 1))
+    own = _reloc(zmap, offsets, 60, half_side=100.0, nav_en=nav)
+    both = _reloc(zmap, offsets, 60, half_side=100.0, nav_en=nav, both_squares=True)
+    np.testing.assert_array_equal(rl.relocalise_around(inc, up, k, far[0], far[1], both),
+                                  rl.relocalise_around(inc, up, k, far[0], far[1], own))
+    assert rl.relocalise_around(inc, up, k, far[0], far[1], both)[0]
+    want = rl.relocalise_around_numpy(inc, up, k, far[0], far[1], both)
+    assert want[0]
+    np.testing.assert_allclose(want[1:3], rl.relocalise_around(inc, up, k, far[0], far[1], both)[1:3], atol=1e-9)
+    assert Scenario(filter={"recovery_second_ambiguity": "its-square"}).cell_key() == Scenario().cell_key()
+    assert Scenario(filter={"recovery_second_ambiguity": "both-squares"}).cell_key() != Scenario().cell_key()
+    assert not rl.global_search_of(Scenario().filter, nav).both_squares
+    assert rl.global_search_of(Scenario(filter={"recovery_second_ambiguity": "both-squares"}).filter, nav).both_squares
 
 
 def test_the_second_square_is_an_option_with_a_neutral_value():

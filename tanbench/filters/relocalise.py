@@ -50,17 +50,20 @@ from tanbench.terrain.grid import MapArgs
 # the spec's side of the search (Python only): profile length in updates, half side of the
 # translation square (m), heading span and step (rad), the ambiguity test's std (m), the
 # navigation solution's east and north at the updates (K, 2) when a refused match around the
-# estimate is tried again around it (``filter.recovery_search_around``), else None, and whether
-# only a navigation solution outside the first square is searched around
-GlobalSearch = namedtuple("GlobalSearch", "window half_side span step fix_std nav_en distant_only")
+# estimate is tried again around it (``filter.recovery_search_around``), else None, whether
+# only a navigation solution outside the first square is searched around, and whether the second
+# square's ambiguity test weighs both squares' candidates (``filter.recovery_second_ambiguity``)
+GlobalSearch = namedtuple("GlobalSearch", "window half_side span step fix_std nav_en distant_only both_squares")
 
 # what the jitted loop takes: the beams' navigation-frame vectors times ranges at every update
 # (K, m, 3; NaN without a range), the map (``MapArgs``), the heading candidates (D,), the search
 # square's half side in cells and its cell (m), the profile length, the altitude std of the
 # ambiguity test's likelihood and its position std threshold, the second search's centres at
-# the updates (K, 2; no rows: no second search), and the least offset (m, on either axis) of a
-# centre from the estimate for it to be searched (0: always; the square's half side: outside it)
-Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step window sig_u fix_std nav_en nav_min_offset")
+# the updates (K, 2; no rows: no second search), the least offset (m, on either axis) of a
+# centre from the estimate for it to be searched (0: always; the square's half side: outside it),
+# and whether a second square's match must also be unambiguous over the first square's candidates
+Relocalise = namedtuple("Relocalise", "offsets zmap deltas half_cells step window sig_u fix_std nav_en nav_min_offset "
+                                      "both_squares")
 
 # refinement around the best coarse candidate: +-FINE_CELLS steps of a fifth of the map spacing (as TERCOM's)
 FINE_CELLS = 5
@@ -81,7 +84,8 @@ def global_search_of(f, nav_en=None):
     return GlobalSearch(int(f.recovery_profile_updates), f.recovery_max_side_m / 2.0,
                         math.radians(f.recovery_heading_span_deg), math.radians(f.recovery_heading_step_deg),
                         float(f.recovery_fix_std_m), np.ascontiguousarray(nav_en, dtype=np.float64) if second else None,
-                        f.recovery_search_around == "estimate-then-distant-navigation")
+                        f.recovery_search_around == "estimate-then-distant-navigation",
+                        f.recovery_second_ambiguity == "both-squares")
 
 
 def heading_candidates(span, step) -> np.ndarray:
@@ -106,7 +110,7 @@ def relocaliser(search: GlobalSearch, track, beams, ranges, grid, sig_u: float) 
     half_cells = int(math.ceil(search.half_side / res))
     return Relocalise(offsets, zmap, heading_candidates(search.span, search.step), half_cells, float(res),
                       int(search.window), float(sig_u), float(search.fix_std), nav_en,
-                      half_cells * float(res) if search.distant_only else 0.0)
+                      half_cells * float(res) if search.distant_only else 0.0, bool(search.both_squares))
 
 
 @nb.njit(cache=True)
@@ -247,14 +251,30 @@ def global_match(pe, pn, ph, centre_e, centre_n, pings, reloc):
     match, ``found`` False (and the centre, 0) when nothing on the map matched, the best coarse
     candidate is on the square's edge or at either end of the heading candidates, or the match
     is ambiguous."""
+    return decide_match(pe, pn, ph, centre_e, centre_n, pings, reloc, match_surface(pe, pn, ph, centre_e, centre_n, reloc))
+
+
+@nb.njit(cache=True)
+def match_surface(pe, pn, ph, centre_e, centre_n, reloc):
+    """The coarse MSD surface (headings, rows, columns) of the relative profile over the search square
+    around (``centre_e``, ``centre_n``): :func:`coarse_surface`."""
+    half = reloc.half_cells
+    side = 2 * half + 1
+    msd = np.empty((reloc.deltas.shape[0], side, side))
+    coarse_surface(pe + centre_e, pn + centre_n, ph, centre_e, centre_n, half, reloc.step, reloc.deltas, reloc.zmap,
+                   msd)
+    return msd
+
+
+@nb.njit(cache=True)
+def decide_match(pe, pn, ph, centre_e, centre_n, pings, reloc, msd):
+    """:func:`global_match`'s tests and refinement on its coarse surface ``msd`` (:func:`match_surface`)."""
     deltas = reloc.deltas
     half = reloc.half_cells
     step = reloc.step
     side = 2 * half + 1
     ae = pe + centre_e
     an = pn + centre_n
-    msd = np.empty((deltas.shape[0], side, side))
-    coarse_surface(ae, an, ph, centre_e, centre_n, half, step, deltas, reloc.zmap, msd)
     best, bd, bi, bj = _best(msd)
     if best == np.inf:
         return False, centre_e, centre_n, 0.0
@@ -312,17 +332,28 @@ def relocalise(inc, up, k, centre_e, centre_n, reloc):
 
     Returns (found, east, north, delta); not found with fewer than ``min(MIN_UPDATES, window)``
     updates so far, or fewer points than half the profile's updates (dropouts)."""
-    updates = min(k + 1, reloc.window)
-    if updates < min(MIN_UPDATES, reloc.window):
+    pe, pn, ph, pings = match_profile(inc, up, k, reloc)
+    if pings == 0:
         return False, centre_e, centre_n, 0.0
+    return global_match(pe, pn, ph, centre_e, centre_n, pings, reloc)
+
+
+@nb.njit(cache=True)
+def match_profile(inc, up, k, reloc):
+    """The profile :func:`relocalise` matches at update ``k`` (:func:`relative_profile`) and its pings (the
+    ambiguity test's independent observations); 0 pings when it is not matched: fewer than
+    ``min(MIN_UPDATES, window)`` updates so far, or fewer points than half the profile's updates."""
+    updates = min(k + 1, reloc.window)
     cap = updates * reloc.offsets.shape[1]
     pe = np.empty(cap)
     pn = np.empty(cap)
     ph = np.empty(cap)
+    if updates < min(MIN_UPDATES, reloc.window):
+        return pe[:0], pn[:0], ph[:0], 0
     npts = relative_profile(inc, reloc.offsets, up, k, updates, pe, pn, ph)
     if 2 * npts < updates:
-        return False, centre_e, centre_n, 0.0
-    return global_match(pe[:npts], pn[:npts], ph[:npts], centre_e, centre_n, min(npts, updates), reloc)
+        return pe[:0], pn[:0], ph[:0], 0
+    return pe[:npts], pn[:npts], ph[:npts], min(npts, updates)
 
 
 @nb.njit(cache=True)
@@ -333,13 +364,79 @@ def relocalise_around(inc, up, k, est_e, est_n, reloc):
     navigation solution drifts only with its own errors; docs/filters.md 17), if it lies at least
     ``reloc.nav_min_offset`` from the estimate on either axis (section 18: outside the first square).
     Same returns."""
-    found, east, north, delta = relocalise(inc, up, k, est_e, est_n, reloc)
+    pe, pn, ph, pings = match_profile(inc, up, k, reloc)
+    if pings == 0:
+        return False, est_e, est_n, 0.0
+    first = match_surface(pe, pn, ph, est_e, est_n, reloc)
+    found, east, north, delta = decide_match(pe, pn, ph, est_e, est_n, pings, reloc, first)
     if found or k >= reloc.nav_en.shape[0]:
         return found, east, north, delta
     nav_e, nav_n = reloc.nav_en[k, 0], reloc.nav_en[k, 1]
     if max(abs(nav_e - est_e), abs(nav_n - est_n)) < reloc.nav_min_offset:
         return found, east, north, delta
-    return relocalise(inc, up, k, nav_e, nav_n, reloc)
+    second = match_surface(pe, pn, ph, nav_e, nav_n, reloc)
+    answer = decide_match(pe, pn, ph, nav_e, nav_n, pings, reloc, second)
+    if answer[0] and reloc.both_squares and both_squares_std(first, est_e, est_n, second, nav_e, nav_n, reloc.half_cells,
+                                                             reloc.step, pings, reloc.sig_u) > reloc.fix_std:
+        return False, nav_e, nav_n, 0.0
+    return answer
+
+
+@nb.njit(cache=True)
+def both_squares_std(first, e1, n1, second, e2, n2, half_cells, step, pings, sig_u):
+    """TERCOM's ambiguity statistic over two searched squares: the larger position std (m, east or north) of
+    the likelihood exp(-pings (msd - min) / (2 sig_u^2)) (:func:`~tanbench.filters.tercom.surface_likelihood_moments`)
+    over the candidates of the coarse surface ``first`` (centred on ``e1``, ``n1``) and those of ``second``
+    (centred on ``e2``, ``n2``) outside the first square; positions relative to the second centre."""
+    edge = half_cells * step
+    mn = min(_best(first)[0], _best(second)[0])
+    tot = sx = sy = sxx = syy = 0.0
+    for which in range(2):
+        msd = first if which == 0 else second
+        ce = e1 - e2 if which == 0 else 0.0
+        cn = n1 - n2 if which == 0 else 0.0
+        for d in range(msd.shape[0]):
+            for i in range(msd.shape[1]):
+                dy = cn + (i - half_cells) * step
+                for j in range(msd.shape[2]):
+                    v = msd[d, i, j]
+                    dx = ce + (j - half_cells) * step
+                    if v == np.inf or (which == 1 and abs(dx + e2 - e1) <= edge and abs(dy + n2 - n1) <= edge):
+                        continue
+                    w = math.exp(-0.5 * pings * (v - mn) / (sig_u * sig_u))
+                    tot += w
+                    sx += w * dx
+                    sy += w * dy
+                    sxx += w * dx * dx
+                    syy += w * dy * dy
+    if tot <= 0.0:
+        return np.inf
+    mx = sx / tot
+    my = sy / tot
+    return math.sqrt(max(sxx / tot - mx * mx, syy / tot - my * my, 0.0))
+
+
+def both_squares_std_numpy(first, e1, n1, second, e2, n2, half_cells, step, pings, sig_u):
+    """Plain-numpy reference of :func:`both_squares_std`."""
+    off = (np.arange(2 * half_cells + 1) - half_cells) * step
+    xs, ys, vs = [], [], []
+    for msd, ce, cn, drop in ((first, e1 - e2, n1 - n2, False), (second, 0.0, 0.0, True)):
+        dx, dy = np.meshgrid(ce + off, cn + off)
+        dx = np.broadcast_to(dx, msd.shape)
+        dy = np.broadcast_to(dy, msd.shape)
+        keep = np.isfinite(msd)
+        if drop:
+            keep &= ~((np.abs(dx + e2 - e1) <= half_cells * step) & (np.abs(dy + n2 - n1) <= half_cells * step))
+        xs.append(dx[keep])
+        ys.append(dy[keep])
+        vs.append(msd[keep])
+    x, y, v = np.concatenate(xs), np.concatenate(ys), np.concatenate(vs)
+    if v.size == 0:
+        return np.inf
+    w = np.exp(-0.5 * pings * (v - v.min()) / sig_u**2)
+    w = w / w.sum()
+    mx, my = (w * x).sum(), (w * y).sum()
+    return float(np.sqrt(max((w * x**2).sum() - mx**2, (w * y**2).sum() - my**2, 0.0)))
 
 
 def relocalise_numpy(inc, up, k, centre_e, centre_n, reloc):
@@ -362,4 +459,15 @@ def relocalise_around_numpy(inc, up, k, est_e, est_n, reloc):
     nav_e, nav_n = reloc.nav_en[k]
     if max(abs(nav_e - est_e), abs(nav_n - est_n)) < reloc.nav_min_offset:
         return answer
-    return relocalise_numpy(inc, up, k, nav_e, nav_n, reloc)
+    second = relocalise_numpy(inc, up, k, nav_e, nav_n, reloc)
+    if second[0] and reloc.both_squares:
+        updates = min(k + 1, reloc.window)
+        pe, pn, ph = relative_profile_numpy(inc, reloc.offsets, up, k, updates)
+        deltas = np.asarray(reloc.deltas)
+        surfaces = [profile_surface_numpy(pe + ce, pn + cn, ph, ce, cn, reloc.half_cells, reloc.step, deltas,
+                                          reloc.zmap)[0] for ce, cn in ((est_e, est_n), (nav_e, nav_n))]
+        std = both_squares_std_numpy(surfaces[0], est_e, est_n, surfaces[1], nav_e, nav_n, reloc.half_cells, reloc.step,
+                                     min(pe.size, updates), reloc.sig_u)
+        if std > reloc.fix_std:
+            return False, nav_e, nav_n, 0.0
+    return second
