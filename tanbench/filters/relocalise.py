@@ -43,7 +43,7 @@ import numpy as np
 
 from tanbench.filters.beams import nav_frame_offsets
 from tanbench.filters.tercom import (_best, profile_surface, profile_surface_numpy, surface_likelihood_moments,
-                                     surface_likelihood_moments_numpy)
+                                     surface_likelihood_moments_numpy, surface_likelihood_sums)
 from tanbench.navigation.increments import D0E, D0N
 from tanbench.terrain.grid import MapArgs
 
@@ -376,44 +376,37 @@ def relocalise_around(inc, up, k, est_e, est_n, reloc):
         return found, east, north, delta
     second = match_surface(pe, pn, ph, nav_e, nav_n, reloc)
     answer = decide_match(pe, pn, ph, nav_e, nav_n, pings, reloc, second)
-    if answer[0] and reloc.both_squares and both_squares_std(first, est_e, est_n, second, nav_e, nav_n, reloc.half_cells,
-                                                             reloc.step, pings, reloc.sig_u) > reloc.fix_std:
+    if answer[0] and reloc.both_squares and both_squares_std(first, est_e, est_n, second, nav_e, nav_n, reloc.deltas,
+                                                             reloc.half_cells, reloc.step, pings,
+                                                             reloc.sig_u) > reloc.fix_std:
         return False, nav_e, nav_n, 0.0
     return answer
 
 
 @nb.njit(cache=True)
-def both_squares_std(first, e1, n1, second, e2, n2, half_cells, step, pings, sig_u):
+def both_squares_std(first, e1, n1, second, e2, n2, deltas, half_cells, step, pings, sig_u):
     """TERCOM's ambiguity statistic over two searched squares: the larger position std (m, east or north) of
-    the likelihood exp(-pings (msd - min) / (2 sig_u^2)) (:func:`~tanbench.filters.tercom.surface_likelihood_moments`)
+    the likelihood exp(-pings (msd - min) / (2 sig_u^2)) (:func:`~tanbench.filters.tercom.surface_likelihood_sums`)
     over the candidates of the coarse surface ``first`` (centred on ``e1``, ``n1``) and those of ``second``
     (centred on ``e2``, ``n2``) outside the first square; positions relative to the second centre."""
     edge = half_cells * step
     mn = min(_best(first)[0], _best(second)[0])
-    tot = sx = sy = sxx = syy = 0.0
-    for which in range(2):
-        msd = first if which == 0 else second
-        ce = e1 - e2 if which == 0 else 0.0
-        cn = n1 - n2 if which == 0 else 0.0
-        for d in range(msd.shape[0]):
-            for i in range(msd.shape[1]):
-                dy = cn + (i - half_cells) * step
-                for j in range(msd.shape[2]):
-                    v = msd[d, i, j]
-                    dx = ce + (j - half_cells) * step
-                    if v == np.inf or (which == 1 and abs(dx + e2 - e1) <= edge and abs(dy + n2 - n1) <= edge):
-                        continue
-                    w = math.exp(-0.5 * pings * (v - mn) / (sig_u * sig_u))
-                    tot += w
-                    sx += w * dx
-                    sy += w * dy
-                    sxx += w * dx * dx
-                    syy += w * dy * dy
+    outside = second.copy()
+    for i in range(outside.shape[1]):
+        for j in range(outside.shape[2]):
+            if abs(e2 + (j - half_cells) * step - e1) <= edge and abs(n2 + (i - half_cells) * step - n1) <= edge:
+                outside[:, i, j] = np.inf
+    t1, x1, y1, xx1, yy1, _, _ = surface_likelihood_sums(first, deltas, half_cells, step, pings, sig_u, mn)
+    t2, x2, y2, xx2, yy2, _, _ = surface_likelihood_sums(outside, deltas, half_cells, step, pings, sig_u, mn)
+    ce, cn = e1 - e2, n1 - n2  # the first square's offsets moved to the second centre
+    tot = t1 + t2
     if tot <= 0.0:
         return np.inf
-    mx = sx / tot
-    my = sy / tot
-    return math.sqrt(max(sxx / tot - mx * mx, syy / tot - my * my, 0.0))
+    mx = (x1 + ce * t1 + x2) / tot
+    my = (y1 + cn * t1 + y2) / tot
+    vx = (xx1 + 2.0 * ce * x1 + ce * ce * t1 + xx2) / tot - mx * mx
+    vy = (yy1 + 2.0 * cn * y1 + cn * cn * t1 + yy2) / tot - my * my
+    return math.sqrt(max(vx, vy, 0.0))
 
 
 def both_squares_std_numpy(first, e1, n1, second, e2, n2, half_cells, step, pings, sig_u):

@@ -105,13 +105,10 @@ def profile_surface_numpy(pe, pn, ph, pivot_e, pivot_n, half_cells, step, deltas
 
 
 @nb.njit(cache=True)
-def surface_likelihood_moments(msd, deltas, half_cells, step, pings, sig_u):
-    """Likelihood exp(-pings (msd - min) / (2 sig_u^2)) over the surface: its
-    (mean dx, mean dy, var dx, var dy, mean delta, var delta)."""
-    mn = np.inf
-    for v in msd.ravel():
-        if v < mn:
-            mn = v
+def surface_likelihood_sums(msd, deltas, half_cells, step, pings, sig_u, mn):
+    """Sums of the likelihood w = exp(-pings (msd - mn) / (2 sig_u^2)) over the surface's finite candidates:
+    (sum w, of w dx, w dy, w dx^2, w dy^2, w delta, w delta^2), (dx, dy) each candidate's offset from the
+    surface's centre (m)."""
     tot = 0.0
     sx = sy = sxx = syy = sd = sdd = 0.0
     for d in range(msd.shape[0]):
@@ -130,6 +127,18 @@ def surface_likelihood_moments(msd, deltas, half_cells, step, pings, sig_u):
                 syy += w * dy * dy
                 sd += w * deltas[d]
                 sdd += w * deltas[d] * deltas[d]
+    return tot, sx, sy, sxx, syy, sd, sdd
+
+
+@nb.njit(cache=True)
+def surface_likelihood_moments(msd, deltas, half_cells, step, pings, sig_u):
+    """Likelihood exp(-pings (msd - min) / (2 sig_u^2)) over the surface: its
+    (mean dx, mean dy, var dx, var dy, mean delta, var delta)."""
+    mn = np.inf
+    for v in msd.ravel():
+        if v < mn:
+            mn = v
+    tot, sx, sy, sxx, syy, sd, sdd = surface_likelihood_sums(msd, deltas, half_cells, step, pings, sig_u, mn)
     if tot <= 0.0:
         return 0.0, 0.0, np.inf, np.inf, 0.0, np.inf
     mx = sx / tot
