@@ -43,19 +43,23 @@ from numba.extending import (intrinsic, make_attribute_wrapper, models, overload
                              unbox)
 from numba.core import cgutils
 from numba.extending import NativeValue
+from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
 
 from tanbench.filters import FASTMATH
-from tanbench.filters.vecmath import bits_float
+from tanbench.filters.vecmath import bits_float, float_bits
 
 STATE_WORDS = 4  # one xoshiro256++ state
 LANES = 16  # lanes stepped together (4 AVX2 vectors of 4 words)
-FAST_WORDS = STATE_WORDS * LANES + STATE_WORDS  # the lanes' states, then the scalar stream's
+LANE_WORDS = STATE_WORDS * LANES  # the lanes' states
+FAST_WORDS = LANE_WORDS + STATE_WORDS  # the lanes' states, then the scalar stream's
 FAST_STREAM = 0xFA57  # appended to the run's spawn key: the fast generator's own stream
 LAYERS = 256
 MASK64 = (1 << 64) - 1
 ONE_BITS = 0x3FF0000000000000  # the bits of 1.0
-CHUNK = 512  # words made per pass of the lane loop (a multiple of LANES)
+CHUNK = 1024  # words made per pass of the lane loop (a multiple of LANES)
+CHUNK_GROUPS = CHUNK // 8  # a chunk's flags as uint64 words
+FLAG_BLOCK = 64  # groups of eight flags whose flagged ones are listed at a time
 
 
 # ---- ziggurat tables -------------------------------------------------------------------
@@ -105,9 +109,34 @@ ZIG_KI, ZIG_WI, ZIG_FI, ZIG_R = ziggurat_tables()
 # the same tables for the SIMD loop of :func:`normals_from_words`: the layer edges x[i] = WI[i] 2^52
 # (exact: a power-of-two scaling), so that u * WI[i] = (u 2^-52) * x[i] bit for bit, with u 2^-52
 # made from the bits of u (:func:`word_uniform`) rather than by an int64 -> float64 conversion;
-# and KI as int64 (every entry is below 2^52: a signed compare, which AVX2 has, gives the unsigned one)
+# the loop loads x[i] and its miss test packed in one word (:func:`packed_layers`)
 ZIG_X = ZIG_WI * float(1 << 52)
-ZIG_KI_SIGNED = ZIG_KI.astype(np.int64)
+
+
+def packed_layers(x, ki) -> tuple[np.ndarray, int]:
+    """(uint64[256], the smallest biased exponent e0 of x): layer i's edge x[i] and a 9-bit
+    floor of KI[i] in one word, for the rectangle loop of :func:`normals_flagged` to load with
+    one gather (two cost twice as much). Bits 0-51 are x[i]'s mantissa, bits 52-54 its biased
+    exponent minus e0 (x[i] > 0 spans at most 8 binades), bits 55-63 KI[i] >> 43: the word
+    minus e0 2^52 in bits 52-62 is x[i] again, bit for bit, and rabs >> 43 < KI[i] >> 43
+    implies rabs < KI[i] (the converse fails for about one word in 2^10)."""
+    bits = x.view(np.uint64)
+    e0 = int(bits.min() >> np.uint64(52))
+    if (bits >> np.uint64(52)).max() - e0 >= 8:
+        raise ValueError("the layer edges span more than 8 binades")
+    mantissa = bits & np.uint64((1 << 52) - 1)
+    packed = (ki >> np.uint64(43)) << np.uint64(55) | (bits - np.uint64(e0 << 52))
+    assert np.array_equal(mantissa, packed & np.uint64((1 << 52) - 1))
+    return packed, e0
+
+
+ZIG_PACKED, _ZIG_E0 = packed_layers(ZIG_X, ZIG_KI)
+ZIG_E0_BITS = np.uint64(_ZIG_E0 << 52)  # added to a packed word's low 55 bits: the bits of x[i]
+LOW_55 = np.uint64((1 << 55) - 1)
+SIGN_BIT = np.uint64(1 << 63)
+# for the wedge test of :func:`normal_slow` (:func:`_under_density`)
+ZIG_HALF_SQ = 0.5 * np.append(ZIG_X, 0.0) ** 2  # x[i]^2 / 2 for i = 0..256 (x[256] = 0)
+SQUEEZE_MARGIN = 2.0 ** -40  # relative to FI[i + 1]: far beyond the rounding of the bounds (below 1e-14)
 
 
 # ---- xoshiro256++ -------------------------------------------------------------------------
@@ -148,19 +177,43 @@ def word_uniform(w):
     return bits_float(np.int64((w >> np.uint64(12)) | np.uint64(ONE_BITS))) - 1.0
 
 
+@intrinsic
+def _stack_words(typingctx, n):
+    """A pointer to ``n`` (a literal) uint64 words on the stack of the function that calls it."""
+    if not isinstance(n, types.IntegerLiteral):
+        return None
+    size = n.literal_value
+
+    def codegen(context, builder, signature, args):
+        return cgutils.alloca_once(builder, context.get_value_type(types.uint64), size=size)
+
+    return types.CPointer(types.uint64)(n), codegen
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def lane_words(words, out):
     """Fill ``out`` (uint64, length a multiple of LANES) from the lanes of ``words`` (a fast
     generator's state, advanced): word ``r * LANES + l`` is lane ``l``'s ``r``-th. The lanes
-    are independent, so the loop over them is SIMD."""
+    are independent, so the loop over them is SIMD. The lanes' states are stepped in a copy on
+    the stack, which the compiler keeps in registers (``words`` might overlap ``out``: stepped
+    in place, they went through memory every round), and put back at the end."""
+    lanes = nb.carray(_stack_words(LANE_WORDS), LANE_WORDS)
+    for k in range(LANE_WORDS):
+        lanes[k] = words[k]
     for r in range(out.shape[0] // LANES):
         base = r * LANES
         for lane in range(LANES):
-            out[base + lane], words[lane], words[LANES + lane], words[2 * LANES + lane], words[3 * LANES + lane] = \
-                _xoshiro_step(words[lane], words[LANES + lane], words[2 * LANES + lane], words[3 * LANES + lane])
+            out[base + lane], lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane] = \
+                _xoshiro_step(lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane])
+    for k in range(LANE_WORDS):
+        words[k] = lanes[k]
 
 
-@nb.njit(cache=True)
+# The miss path (:func:`normal_slow`, :func:`_normal_tail`) is compiled with FASTMATH, the flags
+# numba gave it when it compiled it for :func:`normals_flagged` (a callee without flags of its own
+# inherits its caller's): stated here, so that its numbers do not depend on which function numba
+# happened to compile first. With "arcp" the division by r is a multiplication by 1 / r.
+@nb.njit(cache=True, fastmath=FASTMATH)
 def _normal_tail(s, negative):
     """A normal beyond the base edge r (Marsaglia's exponential rejection), with the sign."""
     while True:
@@ -170,7 +223,24 @@ def _normal_tail(s, negative):
             return -(ZIG_R + xx) if negative else ZIG_R + xx
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
+def _under_density(i, x, y):
+    """``y < math.exp(-0.5 * x * x)`` for a point of layer i's wedge (1 <= i <= 255, x[i+1] <= x < x[i]),
+    answered without exp unless y is within ``SQUEEZE_MARGIN`` FI[i+1] of a bound: with
+    t = (x[i+1]^2 - x^2) / 2 (in (-0.73, 0]), f(x) = FI[i+1] e^t and
+    1 + t + t^2/2 + t^3/6 <= e^t <= 1 + t + t^2/2. The rounding of t, of the bounds, of FI and of
+    exp is below 1e-14 FI[i+1], so outside the margin the answer is the one exp would give."""
+    t = ZIG_HALF_SQ[i + 1] - 0.5 * x * x
+    upper = 1.0 + t * (1.0 + 0.5 * t)
+    lower = upper + t * t * t * (1.0 / 6.0)
+    if y < ZIG_FI[i + 1] * (lower - SQUEEZE_MARGIN):
+        return True
+    if y >= ZIG_FI[i + 1] * (upper + SQUEEZE_MARGIN):
+        return False
+    return y < math.exp(-0.5 * x * x)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH)
 def normal_slow(s, u):
     """The rest of the ziggurat for a word ``u`` that missed its layer's rectangle (about 1.2 %
     of words): the tail, a wedge test, or new words from the scalar stream ``s`` until one
@@ -184,7 +254,7 @@ def normal_slow(s, u):
             return -x if negative else x
         if i == 0:
             return _normal_tail(s, negative)
-        if ZIG_FI[i] + uniform01(s) * (ZIG_FI[i + 1] - ZIG_FI[i]) < math.exp(-0.5 * x * x):
+        if _under_density(i, x, ZIG_FI[i] + uniform01(s) * (ZIG_FI[i + 1] - ZIG_FI[i])):
             return -x if negative else x
         u = next_u64(s)
 
@@ -199,24 +269,36 @@ def normals_from_words(w, s, out):
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def normals_flagged(w, s, out, flags):
     """:func:`normals_from_words` with ``flags`` (uint8, at least as long as ``out``) to mark the
-    misses in. The sign is applied by a multiplication, not a branch. The rectangle's point
-    u * WI[i] (u the 52-bit abscissa) is computed as (u 2^-52) * x[i]: the same bits
-    (:data:`ZIG_X`). The misses are then found eight flags at a time (a uint64 view) and
-    finished in order: the same numbers as testing every word again, without doing so."""
+    possible misses in. The rectangle's point u * WI[i] (u the 52-bit abscissa) is computed as
+    (u 2^-52) * x[i]: the same bits; x[i] and the miss test come from one table word
+    (:data:`ZIG_PACKED`), whose 9-bit test flags every miss and, rarely, a word that is not one
+    (:func:`normal_slow` then returns the same point at once, drawing nothing). The sign is
+    applied to the bits, not by a branch (a sign flip is exact). The flags are then found eight
+    at a time (a uint64 view, lowest set byte first) and finished in order: the same numbers as
+    testing every word again, without doing so."""
     n = out.shape[0]
     for j in range(n):  # the rectangles: a SIMD loop (no call, no branch)
         u = w[j]
-        i = np.intp(u & np.uint64(0xFF))
-        sign = -1.0 if (u >> np.uint64(8)) & np.uint64(1) else 1.0
-        out[j] = word_uniform(u) * ZIG_X[i] * sign
-        flags[j] = np.uint8(0) if np.int64(u >> np.uint64(12)) < ZIG_KI_SIGNED[i] else np.uint8(1)
+        packed = ZIG_PACKED[np.intp(u & np.uint64(0xFF))]
+        x = bits_float(np.int64((packed & LOW_55) + ZIG_E0_BITS))
+        sign = (u << np.uint64(55)) & SIGN_BIT
+        out[j] = bits_float(float_bits(word_uniform(u) * x) ^ np.int64(sign))
+        flags[j] = np.uint8(0) if (u | LOW_55) < packed else np.uint8(1)  # u >> 55 < packed >> 55
     whole = n - n % 8
     groups = flags[:whole].view(np.uint64)
-    for g in range(groups.shape[0]):  # the misses, in order, from the scalar stream
-        if groups[g] != 0:
-            for j in range(8 * g, 8 * g + 8):
-                if flags[j]:
-                    out[j] = normal_slow(s, w[j])
+    flagged = nb.carray(_stack_words(FLAG_BLOCK), FLAG_BLOCK)
+    for first in range(0, groups.shape[0], FLAG_BLOCK):  # the misses, in order, from the scalar stream
+        count = 0
+        for g in range(first, min(first + FLAG_BLOCK, groups.shape[0])):  # the groups with a flag, no branch
+            flagged[count] = g
+            count += groups[g] != 0
+        for k in range(count):
+            g = flagged[k]
+            found = groups[g]
+            while found != 0:
+                j = 8 * g + (trailing_zeros(found) >> 3)
+                out[j] = normal_slow(s, w[j])
+                found &= found - np.uint64(1)  # a flag is one bit of its byte
     for j in range(whole, n):
         if flags[j]:
             out[j] = normal_slow(s, w[j])
@@ -233,10 +315,10 @@ def uniforms_from_words(w, low, high, out):
 @nb.njit(cache=True)
 def _fast_fill(words, out, normal, low, high):
     """Fill the 1-D ``out`` from the fast generator's state ``words``: normals, or uniforms
-    in [low, high). Words are made in chunks (a multiple of LANES); words of a chunk's last
-    round beyond ``out`` are dropped."""
-    buf = np.empty(CHUNK, dtype=np.uint64)
-    flags = np.empty(CHUNK, dtype=np.uint8)
+    in [low, high). Words are made in chunks (a multiple of LANES) into a buffer on the stack;
+    words of a chunk's last round beyond ``out`` are dropped."""
+    buf = nb.carray(_stack_words(CHUNK), CHUNK)
+    flags = nb.carray(_stack_words(CHUNK_GROUPS), CHUNK_GROUPS).view(np.uint8)
     scalar = words[STATE_WORDS * LANES:]
     n = out.shape[0]
     start = 0
@@ -576,7 +658,7 @@ def normals_from_words_numpy(w, scalar_state) -> np.ndarray:
                 break
             if i == 0:
                 while True:
-                    xx = -math.log1p(-uni()) / ZIG_R
+                    xx = -math.log1p(-uni()) * (1.0 / ZIG_R)  # as compiled (:func:`_normal_tail`)
                     yy = -math.log1p(-uni())
                     if yy + yy > xx * xx:
                         break
