@@ -8,7 +8,11 @@ straddling +-180 deg averages correctly; the returned mean yaw is unwrapped arou
 The sums run over four interleaved accumulators, added in a fixed order at the end: four
 independent chains keep the adder busy (a single chain waits on each addition), and the
 order, hence every last bit, is the same on every machine and in every process (a
-vectorising compiler would choose the order by the machine's vector width).
+vectorising compiler would choose the order by the machine's vector width). The four chains
+are the four lanes of one 256-bit vector (``vecmath.lane_moments``, ``lane_wrapped_moments``,
+``lane_cross``: LLVM left the scalar chains scalar): the same operations on the same elements in the same order,
+so the same bits as the scalar loops (:func:`weighted_moments_scalar`,
+:func:`weighted_cross_scalar`, the tests' check), four elements an instruction.
 """
 
 from __future__ import annotations
@@ -17,8 +21,8 @@ import math
 
 import numba as nb
 import numpy as np
-
 from tanbench.filters import FASTMATH
+from tanbench.filters.vecmath import lane_cross, lane_moments, lane_wrapped_moments
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
@@ -33,9 +37,33 @@ def _deviation(v, ref, angle):
     return _wrap(v - ref) if angle else v - ref
 
 
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _finish_moments(a0, a1, a2, a3, b0, b1, b2, b3, row, w, ref, angle, m4):
+    """The four chains' sums with the elements after the first ``m4`` added to chain 0, then the chains
+    added in the fixed order."""
+    for j in range(m4, row.shape[0]):
+        d = _deviation(row[j], ref, angle)
+        a0 += w[j] * d
+        b0 += w[j] * d * d
+    return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def weighted_moments(row, w, ref, angle):
-    """(sum w d, sum w d^2) of the deviations d = row - ref (wrapped, if ``angle``)."""
+    """(sum w d, sum w d^2) of the deviations d = row - ref (wrapped, if ``angle``): four chains as
+    the lanes of ``vecmath.lane_moments`` (``lane_wrapped_moments``), then the last elements."""
+    m = row.shape[0]
+    m4 = m - m % 4
+    if angle:
+        a0, a1, a2, a3, b0, b1, b2, b3 = lane_wrapped_moments(row, w, ref, m4 // 4)
+    else:
+        a0, a1, a2, a3, b0, b1, b2, b3 = lane_moments(row, w, ref, m4 // 4)
+    return _finish_moments(a0, a1, a2, a3, b0, b1, b2, b3, row, w, ref, angle, m4)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def weighted_moments_scalar(row, w, ref, angle):
+    """:func:`weighted_moments` as four scalar chains (the tests' check of the lanes)."""
     m = row.shape[0]
     m4 = m - m % 4
     a0 = a1 = a2 = a3 = 0.0
@@ -53,16 +81,24 @@ def weighted_moments(row, w, ref, angle):
         b1 += w[j + 1] * d1 * d1
         b2 += w[j + 2] * d2 * d2
         b3 += w[j + 3] * d3 * d3
-    for j in range(m4, m):
-        d = _deviation(row[j], ref, angle)
-        a0 += w[j] * d
-        b0 += w[j] * d * d
-    return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
+    return _finish_moments(a0, a1, a2, a3, b0, b1, b2, b3, row, w, ref, angle, m4)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def weighted_cross(xe, xn, w, ref_e, ref_n):
-    """sum w (xe - ref_e) (xn - ref_n)."""
+    """sum w (xe - ref_e) (xn - ref_n): four chains as the lanes of ``vecmath.lane_cross``, then the
+    last elements."""
+    m = w.shape[0]
+    m4 = m - m % 4
+    a0, a1, a2, a3 = lane_cross(xe, xn, w, ref_e, ref_n, m4 // 4)
+    for j in range(m4, m):
+        a0 += w[j] * (xe[j] - ref_e) * (xn[j] - ref_n)
+    return (a0 + a1) + (a2 + a3)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def weighted_cross_scalar(xe, xn, w, ref_e, ref_n):
+    """:func:`weighted_cross` as four scalar chains (the tests' check of the lanes)."""
     m = w.shape[0]
     m4 = m - m % 4
     a0 = a1 = a2 = a3 = 0.0

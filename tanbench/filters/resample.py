@@ -39,7 +39,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.rng import fill_normals, fill_uniforms
-from tanbench.filters.vecmath import exp_nonpositive, log_positive
+from tanbench.filters.vecmath import exp_nonpositive, lane_sums, lane_sums_sq, log_positive
 from tanbench.options import REGULARISATION, RESAMPLING
 
 # resampling when ESS < ess_threshold * M, then regularisation of ``cols`` with kernel
@@ -58,36 +58,56 @@ SYSTEMATIC, MULTINOMIAL, STRATIFIED, RESIDUAL = (RESAMPLING[k] for k in ("system
 REG_NONE, REG_LIU_WEST, REG_GORDON = (REGULARISATION[k] for k in ("none", "liu-west", "gordon"))
 
 
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _finish_sum(s0, s1, s2, s3, a, m4, square):
+    """Four chains' sums of a (or a^2) with the elements after the first ``m4`` added to chain 0,
+    then the chains added in the fixed order."""
+    for j in range(m4, a.shape[0]):
+        s0 += a[j] * a[j] if square else a[j]
+    return (s0 + s1) + (s2 + s3)
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def sum4(a):
-    """sum(a) over four interleaved accumulators, added in a fixed order."""
-    m = a.shape[0]
-    m4 = m - m % 4
+    """sum(a) over four interleaved accumulators, added in a fixed order: the accumulators are the
+    lanes of ``vecmath.lane_sums`` (the same bits as :func:`sum4_scalar`)."""
+    m4 = a.shape[0] - a.shape[0] % 4
+    s0, s1, s2, s3 = lane_sums(a, m4 // 4)
+    return _finish_sum(s0, s1, s2, s3, a, m4, False)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def sum_sq4(a):
+    """sum(a^2), as :func:`sum4` (``vecmath.lane_sums_sq``; the same bits as :func:`sum_sq4_scalar`)."""
+    m4 = a.shape[0] - a.shape[0] % 4
+    s0, s1, s2, s3 = lane_sums_sq(a, m4 // 4)
+    return _finish_sum(s0, s1, s2, s3, a, m4, True)
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def sum4_scalar(a):
+    """:func:`sum4` as four scalar chains (the tests' check of the lanes)."""
+    m4 = a.shape[0] - a.shape[0] % 4
     s0 = s1 = s2 = s3 = 0.0
     for j in range(0, m4, 4):
         s0 += a[j]
         s1 += a[j + 1]
         s2 += a[j + 2]
         s3 += a[j + 3]
-    for j in range(m4, m):
-        s0 += a[j]
-    return (s0 + s1) + (s2 + s3)
+    return _finish_sum(s0, s1, s2, s3, a, m4, False)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def sum_sq4(a):
-    """sum(a^2), as :func:`sum4`."""
-    m = a.shape[0]
-    m4 = m - m % 4
+def sum_sq4_scalar(a):
+    """:func:`sum_sq4` as four scalar chains (the tests' check of the lanes)."""
+    m4 = a.shape[0] - a.shape[0] % 4
     s0 = s1 = s2 = s3 = 0.0
     for j in range(0, m4, 4):
         s0 += a[j] * a[j]
         s1 += a[j + 1] * a[j + 1]
         s2 += a[j + 2] * a[j + 2]
         s3 += a[j + 3] * a[j + 3]
-    for j in range(m4, m):
-        s0 += a[j] * a[j]
-    return (s0 + s1) + (s2 + s3)
+    return _finish_sum(s0, s1, s2, s3, a, m4, True)
 
 
 @nb.njit(cache=True)

@@ -21,10 +21,12 @@ bitcasts, free in a vector loop).
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 from llvmlite import ir
-from numba.core import types
+from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from tanbench.filters import FASTMATH
@@ -117,3 +119,128 @@ def exp_nonpositive(x):
     scale = bits_float(np.int64(np.int32(kf) + np.int32(1023)) << 52)
     out = y * scale
     return 0.0 if low else out
+
+
+# ---- sums in four fixed chains, as the lanes of one vector ------------------------------------
+# The filters' sums over particles run in four interleaved chains added in a fixed order at the end
+# (the same bits on every machine; ``filters/estimate.py``, ``filters/resample.py``). Written as four
+# scalar chains, LLVM keeps them scalar; these intrinsics run chain l in lane l of one 4-double vector,
+# element j = l (mod 4) after element j - 4: the same operations in the same order, so the same bits,
+# four elements an instruction. Each takes C-contiguous float64 arrays and ``quads`` (their first
+# 4 ``quads`` elements), and returns the four lanes of each sum; the callers add the last elements
+# to lane 0 and the lanes as (l0 + l1) + (l2 + l3), as the scalar chains do.
+V4 = ir.VectorType(ir.DoubleType(), 4)
+INV_TWO_PI = 1.0 / (2.0 * math.pi)  # the scalar wrap's (a + pi) / (2 pi), multiplied as "arcp" compiles it
+
+
+def _contiguous_f8(*arrays) -> bool:
+    return all(isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and a.dtype == types.float64
+               for a in arrays)
+
+
+def _splat(value):
+    return ir.Constant(V4, [value] * 4)
+
+
+def _broadcast(builder, value):
+    out = ir.Constant(V4, ir.Undefined)
+    for lane in range(4):
+        out = builder.insert_element(out, value, ir.Constant(ir.IntType(32), lane))
+    return out
+
+
+def _lanes(builder, vector):
+    return [builder.extract_element(vector, ir.Constant(ir.IntType(32), lane)) for lane in range(4)]
+
+
+def _lane_loop(context, builder, signature, args, narrays, sums, step):
+    """Codegen of a lane sum: ``narrays`` array arguments, then the other arguments (scalars, last
+    ``quads``); ``step(builder, loaded vectors, scalar args)`` gives the ``sums`` vectors to add at
+    every quad. Returns the lanes of every sum as a tuple."""
+    arrays = [context.make_array(t)(context, builder, v) for t, v in zip(signature.args[:narrays], args[:narrays])]
+    accs = [cgutils.alloca_once_value(builder, _splat(0.0)) for _ in range(sums)]
+    scalars = [_broadcast(builder, v) for v in args[narrays:-1]]
+    with cgutils.for_range(builder, args[-1]) as loop:
+        first = builder.mul(loop.index, ir.Constant(loop.index.type, 4))
+        vectors = [builder.load(builder.bitcast(builder.gep(a.data, [first]), V4.as_pointer()), align=8)
+                   for a in arrays]
+        for acc, term in zip(accs, step(builder, vectors, scalars)):
+            builder.store(builder.fadd(builder.load(acc), term), acc)
+    lanes = [v for acc in accs for v in _lanes(builder, builder.load(acc))]
+    return context.make_tuple(builder, signature.return_type, lanes)
+
+
+def _moment_terms(builder, d, wv):
+    wd = builder.fmul(wv, d)
+    return wd, builder.fmul(wd, d)  # w d, (w d) d: the scalar chains' w[j] * d and w[j] * d * d
+
+
+@intrinsic
+def lane_sums(typingctx, a, quads):
+    """The four chains of sum(a) (as ``resample.sum4``): (s0, s1, s2, s3)."""
+    if not _contiguous_f8(a):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return _lane_loop(context, builder, signature, args, 1, 1, lambda b, v, s: [v[0]])
+
+    return types.UniTuple(types.float64, 4)(a, types.intp), codegen
+
+
+@intrinsic
+def lane_sums_sq(typingctx, a, quads):
+    """The four chains of sum(a^2) (as ``resample.sum_sq4``): (s0, s1, s2, s3)."""
+    if not _contiguous_f8(a):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return _lane_loop(context, builder, signature, args, 1, 1, lambda b, v, s: [b.fmul(v[0], v[0])])
+
+    return types.UniTuple(types.float64, 4)(a, types.intp), codegen
+
+
+@intrinsic
+def lane_moments(typingctx, row, w, ref, quads):
+    """The four chains of ``estimate.weighted_moments``: (a0, a1, a2, a3, b0, b1, b2, b3), sums of
+    w d and (w d) d, d = row - ref."""
+    if not _contiguous_f8(row, w):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return _lane_loop(context, builder, signature, args, 2, 2,
+                          lambda b, v, s: _moment_terms(b, b.fsub(v[0], s[0]), v[1]))
+
+    return types.UniTuple(types.float64, 8)(row, w, types.float64, types.intp), codegen
+
+
+@intrinsic
+def lane_wrapped_moments(typingctx, row, w, ref, quads):
+    """:func:`lane_moments` of the deviations wrapped to an angle as ``estimate._wrap`` compiles:
+    d - 2 pi floor((d + pi) * INV_TWO_PI)."""
+    if not _contiguous_f8(row, w):
+        return None
+
+    def codegen(context, builder, signature, args):
+        floor = cgutils.get_or_insert_function(builder.module, ir.FunctionType(V4, [V4]), "llvm.floor.v4f64")
+
+        def step(b, v, s):
+            d = b.fsub(v[0], s[0])
+            turns = b.call(floor, [b.fmul(b.fadd(d, _splat(math.pi)), _splat(INV_TWO_PI))])
+            return _moment_terms(b, b.fsub(d, b.fmul(turns, _splat(2.0 * math.pi))), v[1])
+
+        return _lane_loop(context, builder, signature, args, 2, 2, step)
+
+    return types.UniTuple(types.float64, 8)(row, w, types.float64, types.intp), codegen
+
+
+@intrinsic
+def lane_cross(typingctx, xe, xn, w, ref_e, ref_n, quads):
+    """The four chains of ``estimate.weighted_cross``: sums of (w (xe - ref_e)) (xn - ref_n)."""
+    if not _contiguous_f8(xe, xn, w):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return _lane_loop(context, builder, signature, args, 3, 1,
+                          lambda b, v, s: [b.fmul(b.fmul(v[2], b.fsub(v[0], s[0])), b.fsub(v[1], s[1]))])
+
+    return types.UniTuple(types.float64, 4)(xe, xn, w, types.float64, types.float64, types.intp), codegen
