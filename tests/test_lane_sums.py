@@ -56,3 +56,22 @@ def test_weighted_estimate_still_matches_numpy():
     np.testing.assert_allclose(mean, want[0], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(var, want[1], rtol=1e-9, atol=1e-15)
     np.testing.assert_allclose(cov, want[2], rtol=1e-9, atol=1e-15)
+
+
+def test_max_log_weight_lanes_find_the_first_maximum():
+    """``resample.max_log_weight`` from ``vecmath.lane_first_max``: the value element-by-element search finds,
+    NaN passed over, -inf for none, and among zeros of both signs the first one (the sign of zero included)."""
+    rng = np.random.default_rng(9)
+    for trial in range(300):
+        m = int(rng.integers(0, 300 if trial % 2 else 5000))
+        a = rng.normal(size=m) * 10.0 ** rng.uniform(-3, 3)
+        if trial % 5 == 0 and m:
+            a[rng.integers(0, m, 3)] = np.nan
+        if trial % 7 == 0:
+            a = np.where(rng.random(m) < 0.5, 0.0, -0.0) - (rng.random(m) < 0.3)
+        if trial % 11 == 0:
+            a[:] = (np.nan, -np.inf)[trial % 2]
+        assert _same(rs.max_log_weight(a), rs.max_log_weight_scalar(a))
+    assert rs.max_log_weight(np.array([-0.0, 0.0, -1.0, -2.0, 0.0])) == 0.0
+    assert np.signbit(rs.max_log_weight(np.array([-0.0, 0.0, -1.0, -2.0, 0.0])))
+    assert not np.signbit(rs.max_log_weight(np.array([-3.0, 0.0, -1.0, -2.0, -0.0, 0.0])))

@@ -39,7 +39,7 @@ import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.rng import fill_normals, fill_uniforms
-from tanbench.filters.vecmath import exp_nonpositive, lane_sums, lane_sums_sq, log_positive
+from tanbench.filters.vecmath import exp_nonpositive, lane_first_max, lane_sums, lane_sums_sq, log_positive
 from tanbench.options import REGULARISATION, RESAMPLING
 
 # resampling when ESS < ess_threshold * M, then regularisation of ``cols`` with kernel
@@ -112,7 +112,24 @@ def sum_sq4_scalar(a):
 
 @nb.njit(cache=True)
 def max_log_weight(logw):
-    """The largest log-weight (-inf for none; NaN entries are passed over)."""
+    """The largest log-weight (-inf for none; NaN entries are passed over): the first occurrence in index
+    order, as :func:`max_log_weight_scalar` finds it (which matters only for the sign of a zero), from
+    the four lanes of ``vecmath.lane_first_max``."""
+    m4 = logw.shape[0] - logw.shape[0] % 4
+    m0, m1, m2, m3, j0, j1, j2, j3 = lane_first_max(logw, m4 // 4)
+    mx, at = m0, j0
+    for m, j in ((m1, j1), (m2, j2), (m3, j3)):
+        if m > mx or (m == mx and j < at):
+            mx, at = m, j
+    for j in range(m4, logw.shape[0]):
+        if logw[j] > mx:
+            mx = logw[j]
+    return mx
+
+
+@nb.njit(cache=True)
+def max_log_weight_scalar(logw):
+    """:func:`max_log_weight` element by element (the tests' check of the lanes)."""
     mx = -np.inf
     for j in range(logw.shape[0]):
         if logw[j] > mx:

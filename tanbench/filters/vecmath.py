@@ -244,3 +244,40 @@ def lane_cross(typingctx, xe, xn, w, ref_e, ref_n, quads):
                           lambda b, v, s: [b.fmul(b.fmul(v[2], b.fsub(v[0], s[0])), b.fsub(v[1], s[1]))])
 
     return types.UniTuple(types.float64, 4)(xe, xn, w, types.float64, types.float64, types.intp), codegen
+
+
+@intrinsic
+def lane_first_max(typingctx, a, quads):
+    """The running maximum of ``resample.max_log_weight`` (``if a[j] > mx: mx = a[j]``, NaN passed over)
+    in four lanes: (m0, m1, m2, m3, j0, j1, j2, j3), lane l's maximum over the elements j = l (mod 4)
+    of the first 4 ``quads`` and the index where it first occurred (-inf and -1 for none)."""
+    if not _contiguous_f8(a):
+        return None
+
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        iv4 = ir.VectorType(i64, 4)
+        arr = context.make_array(signature.args[0])(context, builder, args[0])
+        best = cgutils.alloca_once_value(builder, _splat(-math.inf))
+        where = cgutils.alloca_once_value(builder, ir.Constant(iv4, [-1] * 4))
+        with cgutils.for_range(builder, args[1]) as loop:
+            first = builder.mul(loop.index, ir.Constant(loop.index.type, 4))
+            v = builder.load(builder.bitcast(builder.gep(arr.data, [first]), V4.as_pointer()), align=8)
+            index = builder.add(_broadcast_int(builder, first, iv4), ir.Constant(iv4, [0, 1, 2, 3]))
+            m = builder.load(best)
+            greater = builder.fcmp_ordered(">", v, m)
+            builder.store(builder.select(greater, v, m), best)
+            builder.store(builder.select(greater, index, builder.load(where)), where)
+        values = _lanes(builder, builder.load(best))
+        w = builder.load(where)
+        indices = [builder.extract_element(w, ir.Constant(ir.IntType(32), lane)) for lane in range(4)]
+        return context.make_tuple(builder, signature.return_type, values + indices)
+
+    return types.Tuple([types.float64] * 4 + [types.int64] * 4)(a, types.intp), codegen
+
+
+def _broadcast_int(builder, value, vector_type):
+    out = ir.Constant(vector_type, ir.Undefined)
+    for lane in range(4):
+        out = builder.insert_element(out, value, ir.Constant(ir.IntType(32), lane))
+    return out
