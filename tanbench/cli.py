@@ -823,7 +823,7 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
                    "ns per particle-step:")
         for r in figures["yardstick"]:
             typer.echo(f"    tight-dvl {r['tight_dvl_ns']:6.1f}, yardstick {r['yardstick_ns']:6.1f}: "
-                       f"ratio {r['tight_dvl_ns'] / r['yardstick_ns']:.2f}")
+                       f"ratio {r['tight_dvl_ns'] / r['yardstick_ns']:.3f}")
     elif yardstick:
         typer.echo(f"  yardstick: no file {yardstick} (--yardstick PATH to time tight-dvl against it)")
 
