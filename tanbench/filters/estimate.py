@@ -38,9 +38,11 @@ def _deviation(v, ref, angle):
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _finish_moments(a0, a1, a2, a3, b0, b1, b2, b3, row, w, ref, angle, m4):
-    """The four chains' sums with the elements after the first ``m4`` added to chain 0, then the chains
-    added in the fixed order."""
+def _finish_moments(a, b, row, w, ref, angle, m4):
+    """The four chains' sums ``a`` (of w d) and ``b`` (of w d^2) with the elements after the first ``m4``
+    added to chain 0, then the chains added in the fixed order."""
+    a0, a1, a2, a3 = a
+    b0, b1, b2, b3 = b
     for j in range(m4, row.shape[0]):
         d = _deviation(row[j], ref, angle)
         a0 += w[j] * d
@@ -58,7 +60,7 @@ def weighted_moments(row, w, ref, angle):
         a0, a1, a2, a3, b0, b1, b2, b3 = lane_wrapped_moments(row, w, ref, m4 // 4)
     else:
         a0, a1, a2, a3, b0, b1, b2, b3 = lane_moments(row, w, ref, m4 // 4)
-    return _finish_moments(a0, a1, a2, a3, b0, b1, b2, b3, row, w, ref, angle, m4)
+    return _finish_moments((a0, a1, a2, a3), (b0, b1, b2, b3), row, w, ref, angle, m4)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -81,7 +83,7 @@ def weighted_moments_scalar(row, w, ref, angle):
         b1 += w[j + 1] * d1 * d1
         b2 += w[j + 2] * d2 * d2
         b3 += w[j + 3] * d3 * d3
-    return _finish_moments(a0, a1, a2, a3, b0, b1, b2, b3, row, w, ref, angle, m4)
+    return _finish_moments((a0, a1, a2, a3), (b0, b1, b2, b3), row, w, ref, angle, m4)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
