@@ -142,8 +142,8 @@ def _splat(value):
     return ir.Constant(V4, [value] * 4)
 
 
-def _broadcast(builder, value):
-    out = ir.Constant(V4, ir.Undefined)
+def _broadcast(builder, value, vector_type=V4):
+    out = ir.Constant(vector_type, ir.Undefined)
     for lane in range(4):
         out = builder.insert_element(out, value, ir.Constant(ir.IntType(32), lane))
     return out
@@ -263,7 +263,7 @@ def lane_first_max(typingctx, a, quads):
         with cgutils.for_range(builder, args[1]) as loop:
             first = builder.mul(loop.index, ir.Constant(loop.index.type, 4))
             v = builder.load(builder.bitcast(builder.gep(arr.data, [first]), V4.as_pointer()), align=8)
-            index = builder.add(_broadcast_int(builder, first, iv4), ir.Constant(iv4, [0, 1, 2, 3]))
+            index = builder.add(_broadcast(builder, first, iv4), ir.Constant(iv4, [0, 1, 2, 3]))
             m = builder.load(best)
             greater = builder.fcmp_ordered(">", v, m)
             builder.store(builder.select(greater, v, m), best)
@@ -275,9 +275,3 @@ def lane_first_max(typingctx, a, quads):
 
     return types.Tuple([types.float64] * 4 + [types.int64] * 4)(a, types.intp), codegen
 
-
-def _broadcast_int(builder, value, vector_type):
-    out = ir.Constant(vector_type, ir.Undefined)
-    for lane in range(4):
-        out = builder.insert_element(out, value, ir.Constant(ir.IntType(32), lane))
-    return out
