@@ -59,7 +59,8 @@ MASK64 = (1 << 64) - 1
 ONE_BITS = 0x3FF0000000000000  # the bits of 1.0
 CHUNK = 1024  # words made per pass of the lane loop (a multiple of LANES)
 CHUNK_GROUPS = CHUNK // 8  # a chunk's flags as uint64 words
-FLAG_BLOCK = 64  # groups of eight flags whose flagged ones are listed at a time
+BITMAP_WORDS = CHUNK // 64  # a chunk's flags as a bitmap of uint64 words
+BYTE_BITS = np.uint64(0x0102040810204080)  # (a uint64 of eight 0/1 bytes times this) >> 56: their bits
 
 
 # ---- ziggurat tables -------------------------------------------------------------------
@@ -115,7 +116,7 @@ ZIG_X = ZIG_WI * float(1 << 52)
 
 def packed_layers(x, ki) -> tuple[np.ndarray, int]:
     """(uint64[256], the smallest biased exponent e0 of x): layer i's edge x[i] and a 9-bit
-    floor of KI[i] in one word, for the rectangle loop of :func:`normals_flagged` to load with
+    floor of KI[i] in one word, for the rectangle test of :func:`_rectangle` to load with
     one gather (two cost twice as much). Bits 0-51 are x[i]'s mantissa, bits 52-54 its biased
     exponent minus e0 (x[i] > 0 spans at most 8 binades), bits 55-63 KI[i] >> 43: the word
     minus e0 2^52 in bits 52-62 is x[i] again, bit for bit, and rabs >> 43 < KI[i] >> 43
@@ -210,10 +211,12 @@ def lane_words(words, out):
 
 
 # The miss path (:func:`normal_slow`, :func:`_normal_tail`) is compiled with FASTMATH, the flags
-# numba gave it when it compiled it for :func:`normals_flagged` (a callee without flags of its own
-# inherits its caller's): stated here, so that its numbers do not depend on which function numba
-# happened to compile first. With "arcp" the division by r is a multiplication by 1 / r.
-@nb.njit(cache=True, fastmath=FASTMATH)
+# numba gave it when it first compiled it as a callee of the FASTMATH rectangle pass (a callee
+# without flags of its own inherits its caller's): stated here, so that its numbers do not depend
+# on which function numba happened to compile first. With "arcp" the division by r is a
+# multiplication by 1 / r. Both are inlined (numba's inliner) into :func:`finish_flagged`, also
+# FASTMATH, where the scalar stream is then kept in registers.
+@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
 def _normal_tail(s, negative):
     """A normal beyond the base edge r (Marsaglia's exponential rejection), with the sign."""
     while True:
@@ -240,7 +243,7 @@ def _under_density(i, x, y):
     return y < math.exp(-0.5 * x * x)
 
 
-@nb.njit(cache=True, fastmath=FASTMATH)
+@nb.njit(cache=True, fastmath=FASTMATH, inline="always")
 def normal_slow(s, u):
     """The rest of the ziggurat for a word ``u`` that missed its layer's rectangle (about 1.2 %
     of words): the tail, a wedge test, or new words from the scalar stream ``s`` until one
@@ -259,49 +262,147 @@ def normal_slow(s, u):
         u = next_u64(s)
 
 
-@nb.njit(cache=True)
-def normals_from_words(w, s, out):
-    """Ziggurat normals into ``out`` from the words ``w`` (one each), the rare misses finished
-    from the scalar stream ``s`` (:func:`normals_flagged` with a buffer of its own)."""
-    normals_flagged(w, s, out, np.empty(out.shape[0], dtype=np.uint8))
+@nb.njit(cache=True, inline="always")
+def _finish_word(s, u):
+    """:func:`normal_slow` of a flagged word ``u`` (the same number, the same words drawn from ``s``),
+    its common outcomes chosen without a branch: ``u`` in its rectangle after all, ``u``'s wedge
+    test decided by the bounds of :func:`_under_density` (accepted, or rejected and the next word
+    of ``s`` in its rectangle). The two words they may draw are made in advance and the state put
+    back to the one its outcome leaves; anything else (the tail, a test within the margin, a
+    second miss, about 2 % of flagged words) is :func:`normal_slow` from the start. The same
+    expressions as :func:`normal_slow`, :func:`uniform01` and :func:`_under_density`, so the same
+    bits. Written without branches but the rare one (LLVM still branches on ``inside``, about 7 %
+    of flagged words); the wedge's accept or reject, about half and half, had a branch mispredicted
+    for about every second flagged word."""
+    i = np.intp(u & np.uint64(0xFF))
+    rabs = u >> np.uint64(12)
+    x = np.float64(rabs) * ZIG_WI[i]
+    s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
+    drawn, a0, a1, a2, a3 = _xoshiro_step(s0, s1, s2, s3)  # the wedge test's uniform
+    v, b0, b1, b2, b3 = _xoshiro_step(a0, a1, a2, a3)  # the next word, if rejected
+    y = ZIG_FI[i] + np.float64(drawn >> np.uint64(11)) * (1.0 / 9007199254740992.0) * (ZIG_FI[i + 1] - ZIG_FI[i])
+    t = ZIG_HALF_SQ[i + 1] - 0.5 * x * x  # :func:`_under_density`'s bounds, the same expressions
+    upper = 1.0 + t * (1.0 + 0.5 * t)
+    lower = upper + t * t * t * (1.0 / 6.0)
+    below = y < ZIG_FI[i + 1] * (lower - SQUEEZE_MARGIN)
+    above = y >= ZIG_FI[i + 1] * (upper + SQUEEZE_MARGIN)
+    k = np.intp(v & np.uint64(0xFF))
+    vabs = v >> np.uint64(12)
+    xv = np.float64(vabs) * ZIG_WI[k]
+    inside = rabs < ZIG_KI[i]
+    if not (inside | ((i != 0) & (below | (above & (vabs < ZIG_KI[k]))))):  # bitwise: no branches
+        return normal_slow(s, u)
+    first = inside | below
+    z = x if first else xv
+    negative = ((u if first else v) >> np.uint64(8)) & np.uint64(1)
+    one = below & ~inside  # the state its outcome leaves: no word drawn, one, or two
+    s[0] = s0 if inside else (a0 if one else b0)
+    s[1] = s1 if inside else (a1 if one else b1)
+    s[2] = s2 if inside else (a2 if one else b2)
+    s[3] = s3 if inside else (a3 if one else b3)
+    return -z if negative else z
 
 
-@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def normals_flagged(w, s, out, flags):
-    """:func:`normals_from_words` with ``flags`` (uint8, at least as long as ``out``) to mark the
-    possible misses in. The rectangle's point u * WI[i] (u the 52-bit abscissa) is computed as
+@nb.njit(cache=True, inline="always")
+def _rectangle(u):
+    """(the normal of word ``u`` if it lies in its layer's rectangle, 1 if it may not: uint8)
+    without a branch. The rectangle's point u * WI[i] (u the 52-bit abscissa) is computed as
     (u 2^-52) * x[i]: the same bits; x[i] and the miss test come from one table word
     (:data:`ZIG_PACKED`), whose 9-bit test flags every miss and, rarely, a word that is not one
     (:func:`normal_slow` then returns the same point at once, drawing nothing). The sign is
-    applied to the bits, not by a branch (a sign flip is exact). The flags are then found eight
-    at a time (a uint64 view, lowest set byte first) and finished in order: the same numbers as
-    testing every word again, without doing so."""
+    applied to the bits (a sign flip is exact)."""
+    packed = ZIG_PACKED[np.intp(u & np.uint64(0xFF))]
+    x = bits_float(np.int64((packed & LOW_55) + ZIG_E0_BITS))
+    sign = (u << np.uint64(55)) & SIGN_BIT
+    flag = np.uint8(0) if (u | LOW_55) < packed else np.uint8(1)  # u >> 55 < packed >> 55
+    return bits_float(float_bits(word_uniform(u) * x) ^ np.int64(sign)), flag
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def finish_flagged(w, s, out, bits, listed):
+    """Replace ``out[j]`` by :func:`normal_slow` of word ``w[j]`` (:func:`_finish_word`) wherever bit
+    ``j % 64`` of ``bits[j // 64]`` (uint64, none set beyond ``out``; emptied) is set, in order of j,
+    from the scalar stream ``s``. The bitmap's nonzero words are listed (in ``listed``, intp, as long
+    as ``bits``) and the flagged words taken lowest bit first in one loop with no other branch: the
+    same numbers as testing every word again, without doing so."""
+    stream = nb.carray(_stack_words(STATE_WORDS), STATE_WORDS)  # the scalar stream, kept in registers
+    for k in range(STATE_WORDS):
+        stream[k] = s[k]
+    count = 0
+    for q in range(bits.shape[0]):  # the bitmap's nonzero words, no branch
+        listed[count] = q
+        count += bits[q] != 0
+    k = 0
+    while k < count:  # lowest bit of the k-th listed word: taken, cleared; k moves on once it is empty
+        q = listed[k]
+        found = bits[q]
+        j = 64 * q + np.intp(trailing_zeros(found))
+        out[j] = _finish_word(stream, w[j])
+        found &= found - np.uint64(1)
+        bits[q] = found
+        k += found == 0
+    for k in range(STATE_WORDS):
+        s[k] = stream[k]
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def normals_from_words(w, s, out):
+    """Ziggurat normals into ``out`` from the words ``w`` (one each), the rare misses finished
+    from the scalar stream ``s``: the rectangles (:func:`_rectangle`, a SIMD loop: no call, no
+    branch), their flags a bitmap, then the flagged words finished in order (:func:`finish_flagged`)."""
     n = out.shape[0]
-    for j in range(n):  # the rectangles: a SIMD loop (no call, no branch)
-        u = w[j]
-        packed = ZIG_PACKED[np.intp(u & np.uint64(0xFF))]
-        x = bits_float(np.int64((packed & LOW_55) + ZIG_E0_BITS))
-        sign = (u << np.uint64(55)) & SIGN_BIT
-        out[j] = bits_float(float_bits(word_uniform(u) * x) ^ np.int64(sign))
-        flags[j] = np.uint8(0) if (u | LOW_55) < packed else np.uint8(1)  # u >> 55 < packed >> 55
-    whole = n - n % 8
-    groups = flags[:whole].view(np.uint64)
-    flagged = nb.carray(_stack_words(FLAG_BLOCK), FLAG_BLOCK)
-    for first in range(0, groups.shape[0], FLAG_BLOCK):  # the misses, in order, from the scalar stream
-        count = 0
-        for g in range(first, min(first + FLAG_BLOCK, groups.shape[0])):  # the groups with a flag, no branch
-            flagged[count] = g
-            count += groups[g] != 0
-        for k in range(count):
-            g = flagged[k]
-            found = groups[g]
-            while found != 0:
-                j = 8 * g + (trailing_zeros(found) >> 3)
-                out[j] = normal_slow(s, w[j])
-                found &= found - np.uint64(1)  # a flag is one bit of its byte
-    for j in range(whole, n):
-        if flags[j]:
-            out[j] = normal_slow(s, w[j])
+    bits = np.zeros((n + 63) // 64, dtype=np.uint64)
+    for j in range(n):
+        out[j], flag = _rectangle(w[j])
+        bits[j >> 6] |= np.uint64(flag) << np.uint64(j & 63)
+    finish_flagged(w, s, out, bits, np.empty(bits.shape[0], dtype=np.intp))
+
+
+@nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def lane_normals(words, s, out):
+    """Normals into ``out`` (at most CHUNK) from the lanes of ``words`` (:func:`lane_words`, the lanes
+    advanced by ``out``'s length rounded up to a multiple of LANES), the flagged words finished from
+    the scalar stream ``s``: :func:`normals_from_words` of :func:`lane_words`' words, in one pass. Each
+    round's words are used as they are made (a pass of their own cost a store and a load of each)
+    and kept on the stack for :func:`finish_flagged`, with their flags: bytes from the SIMD loop,
+    each round's 16 made a 16-bit mask of the bitmap. Words of a last round beyond ``out`` are
+    dropped."""
+    w = nb.carray(_stack_words(CHUNK), CHUNK)
+    bits = nb.carray(_stack_words(BITMAP_WORDS), BITMAP_WORDS)
+    listed = nb.carray(_stack_words(BITMAP_WORDS), BITMAP_WORDS).view(np.intp)
+    lanes = nb.carray(_stack_words(LANE_WORDS), LANE_WORDS)
+    made = nb.carray(_stack_words(LANES), LANES)  # a round's words
+    eights = nb.carray(_stack_words(CHUNK_GROUPS), CHUNK_GROUPS)  # the flags, as bytes
+    flags = eights.view(np.uint8)
+    for k in range(LANE_WORDS):
+        lanes[k] = words[k]
+    for q in range(BITMAP_WORDS):
+        bits[q] = np.uint64(0)
+    n = out.shape[0]
+    for r in range(n // LANES):
+        base = r * LANES
+        for lane in range(LANES):
+            made[lane], lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane] = \
+                _xoshiro_step(lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane])
+        for lane in range(LANES):
+            u = made[lane]
+            w[base + lane] = u
+            out[base + lane], flags[base + lane] = _rectangle(u)
+        low = (eights[base >> 3] * BYTE_BITS) >> np.uint64(56)  # the round's 16 flags: a 16-bit mask
+        high = (eights[(base >> 3) + 1] * BYTE_BITS) >> np.uint64(56)
+        bits[base >> 6] |= (low | high << np.uint64(8)) << np.uint64(base & 63)
+    base = n - n % LANES
+    if base < n:  # a last round, partly used
+        for lane in range(LANES):
+            w[base + lane], lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane] = \
+                _xoshiro_step(lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane])
+        for j in range(base, n):
+            out[j], flag = _rectangle(w[j])
+            bits[j >> 6] |= np.uint64(flag) << np.uint64(j & 63)
+    for k in range(LANE_WORDS):
+        words[k] = lanes[k]
+    used = (n + 63) // 64
+    finish_flagged(w, s, out, bits[:used], listed[:used])
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -315,20 +416,20 @@ def uniforms_from_words(w, low, high, out):
 @nb.njit(cache=True)
 def _fast_fill(words, out, normal, low, high):
     """Fill the 1-D ``out`` from the fast generator's state ``words``: normals, or uniforms
-    in [low, high). Words are made in chunks (a multiple of LANES) into a buffer on the stack;
-    words of a chunk's last round beyond ``out`` are dropped."""
+    in [low, high). Words are made in chunks (a multiple of LANES): normals by :func:`lane_normals`,
+    uniforms into a buffer on the stack first; words of a chunk's last round beyond ``out`` are
+    dropped."""
     buf = nb.carray(_stack_words(CHUNK), CHUNK)
-    flags = nb.carray(_stack_words(CHUNK_GROUPS), CHUNK_GROUPS).view(np.uint8)
     scalar = words[STATE_WORDS * LANES:]
     n = out.shape[0]
     start = 0
     while start < n:
         size = min(CHUNK, n - start)
         made = (size + LANES - 1) // LANES * LANES
-        lane_words(words, buf[:made])
         if normal:
-            normals_flagged(buf[:size], scalar, out[start:start + size], flags)
+            lane_normals(words, scalar, out[start:start + size])
         else:
+            lane_words(words, buf[:made])
             uniforms_from_words(buf[:size], low, high, out[start:start + size])
         start += size
 
