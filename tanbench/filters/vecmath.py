@@ -17,6 +17,10 @@ numpy's ``log`` and ``exp`` (their plain-numpy references) over those ranges.
 
 Integer/float reinterpretations are :func:`float_bits` and :func:`bits_float` (LLVM
 bitcasts, free in a vector loop).
+
+The ``lane_*`` intrinsics (below) run the filters' fixed-order sums over particles, four
+interleaved chains, as the four lanes of one vector: the same bits as the scalar chains, which
+LLVM leaves scalar.
 """
 
 from __future__ import annotations
