@@ -168,8 +168,14 @@ def next_u64(s):
 
 @nb.njit(cache=True, inline="always")
 def uniform01(s):
-    """A uniform double in [0, 1) from the scalar stream ``s``: a word's top 53 bits times 2^-53."""
-    return np.float64(next_u64(s) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+    """A uniform double in [0, 1) from the scalar stream ``s``: :func:`uniform53` of its next word."""
+    return uniform53(next_u64(s))
+
+
+@nb.njit(cache=True, inline="always")
+def uniform53(word):
+    """A uniform double in [0, 1) from a word's top 53 bits times 2^-53."""
+    return np.float64(word >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
 @nb.njit(cache=True, inline="always")
@@ -233,14 +239,22 @@ def _under_density(i, x, y):
     t = (x[i+1]^2 - x^2) / 2 (in (-0.73, 0]), f(x) = FI[i+1] e^t and
     1 + t + t^2/2 + t^3/6 <= e^t <= 1 + t + t^2/2. The rounding of t, of the bounds, of FI and of
     exp is below 1e-14 FI[i+1], so outside the margin the answer is the one exp would give."""
+    below, above = _wedge_bounds(i, x, y)
+    if below:
+        return True
+    if above:
+        return False
+    return y < math.exp(-0.5 * x * x)
+
+
+@nb.njit(cache=True, inline="always")
+def _wedge_bounds(i, x, y):
+    """(y below the lower bound of f(x) by more than the margin, y at or above the upper bound plus the margin)
+    for :func:`_under_density`'s test: exp is needed only when both are False."""
     t = ZIG_HALF_SQ[i + 1] - 0.5 * x * x
     upper = 1.0 + t * (1.0 + 0.5 * t)
     lower = upper + t * t * t * (1.0 / 6.0)
-    if y < ZIG_FI[i + 1] * (lower - SQUEEZE_MARGIN):
-        return True
-    if y >= ZIG_FI[i + 1] * (upper + SQUEEZE_MARGIN):
-        return False
-    return y < math.exp(-0.5 * x * x)
+    return y < ZIG_FI[i + 1] * (lower - SQUEEZE_MARGIN), y >= ZIG_FI[i + 1] * (upper + SQUEEZE_MARGIN)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, inline="always")
@@ -280,12 +294,8 @@ def _finish_word(s, u):
     s0, s1, s2, s3 = s[0], s[1], s[2], s[3]
     drawn, a0, a1, a2, a3 = _xoshiro_step(s0, s1, s2, s3)  # the wedge test's uniform
     v, b0, b1, b2, b3 = _xoshiro_step(a0, a1, a2, a3)  # the next word, if rejected
-    y = ZIG_FI[i] + np.float64(drawn >> np.uint64(11)) * (1.0 / 9007199254740992.0) * (ZIG_FI[i + 1] - ZIG_FI[i])
-    t = ZIG_HALF_SQ[i + 1] - 0.5 * x * x  # :func:`_under_density`'s bounds, the same expressions
-    upper = 1.0 + t * (1.0 + 0.5 * t)
-    lower = upper + t * t * t * (1.0 / 6.0)
-    below = y < ZIG_FI[i + 1] * (lower - SQUEEZE_MARGIN)
-    above = y >= ZIG_FI[i + 1] * (upper + SQUEEZE_MARGIN)
+    y = ZIG_FI[i] + uniform53(drawn) * (ZIG_FI[i + 1] - ZIG_FI[i])
+    below, above = _wedge_bounds(i, x, y)
     k = np.intp(v & np.uint64(0xFF))
     vabs = v >> np.uint64(12)
     xv = np.float64(vabs) * ZIG_WI[k]
