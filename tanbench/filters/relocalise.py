@@ -303,10 +303,21 @@ def decide_match(pe, pn, ph, centre_e, centre_n, pings, reloc, msd):
 
 def global_match_numpy(pe, pn, ph, centre_e, centre_n, pings, reloc):
     """Plain-numpy reference of :func:`global_match` (on TERCOM's numpy references)."""
+    return decide_match_numpy(pe, pn, ph, centre_e, centre_n, pings, reloc,
+                              match_surface_numpy(pe, pn, ph, centre_e, centre_n, reloc))
+
+
+def match_surface_numpy(pe, pn, ph, centre_e, centre_n, reloc):
+    """Plain-numpy reference of :func:`match_surface` (TERCOM's ``profile_surface_numpy``)."""
+    return profile_surface_numpy(np.asarray(pe) + centre_e, np.asarray(pn) + centre_n, ph, centre_e, centre_n,
+                                 reloc.half_cells, reloc.step, np.asarray(reloc.deltas), reloc.zmap)[0]
+
+
+def decide_match_numpy(pe, pn, ph, centre_e, centre_n, pings, reloc, msd):
+    """Plain-numpy reference of :func:`decide_match`."""
     deltas, half, step = np.asarray(reloc.deltas), reloc.half_cells, reloc.step
     side = 2 * half + 1
     ae, an = np.asarray(pe) + centre_e, np.asarray(pn) + centre_n
-    msd, _ = profile_surface_numpy(ae, an, ph, centre_e, centre_n, half, step, deltas, reloc.zmap)
     bd, bi, bj = np.unravel_index(np.argmin(msd), msd.shape)
     if not np.isfinite(msd[bd, bi, bj]) or bi in (0, side - 1) or bj in (0, side - 1):
         return False, centre_e, centre_n, 0.0
@@ -432,35 +443,34 @@ def both_squares_std_numpy(first, e1, n1, second, e2, n2, half_cells, step, ping
     return float(np.sqrt(max((w * x**2).sum() - mx**2, (w * y**2).sum() - my**2, 0.0)))
 
 
-def relocalise_numpy(inc, up, k, centre_e, centre_n, reloc):
-    """Plain-numpy reference of :func:`relocalise`: the profile by :func:`relative_profile_numpy`, the match by
-    :func:`global_match_numpy`."""
+def match_profile_numpy(inc, up, k, reloc):
+    """Plain-numpy reference of :func:`match_profile`: (pe, pn, ph, pings), 0 pings when not matched."""
     updates = min(k + 1, reloc.window)
     if updates < min(MIN_UPDATES, reloc.window):
-        return False, centre_e, centre_n, 0.0
+        return np.empty(0), np.empty(0), np.empty(0), 0
     pe, pn, ph = relative_profile_numpy(inc, reloc.offsets, up, k, updates)
     if 2 * pe.size < updates:
-        return False, centre_e, centre_n, 0.0
-    return global_match_numpy(pe, pn, ph, centre_e, centre_n, min(pe.size, updates), reloc)
+        return np.empty(0), np.empty(0), np.empty(0), 0
+    return pe, pn, ph, min(pe.size, updates)
 
 
 def relocalise_around_numpy(inc, up, k, est_e, est_n, reloc):
-    """Plain-numpy reference of :func:`relocalise_around`."""
-    answer = relocalise_numpy(inc, up, k, est_e, est_n, reloc)
+    """Plain-numpy reference of :func:`relocalise_around`, in its steps (and of :func:`relocalise`: the same without
+    navigation centres)."""
+    pe, pn, ph, pings = match_profile_numpy(inc, up, k, reloc)
+    if pings == 0:
+        return False, est_e, est_n, 0.0
+    first = match_surface_numpy(pe, pn, ph, est_e, est_n, reloc)
+    answer = decide_match_numpy(pe, pn, ph, est_e, est_n, pings, reloc, first)
     if answer[0] or k >= reloc.nav_en.shape[0]:
         return answer
     nav_e, nav_n = reloc.nav_en[k]
     if max(abs(nav_e - est_e), abs(nav_n - est_n)) < reloc.nav_min_offset:
         return answer
-    second = relocalise_numpy(inc, up, k, nav_e, nav_n, reloc)
-    if second[0] and reloc.both_squares:
-        updates = min(k + 1, reloc.window)
-        pe, pn, ph = relative_profile_numpy(inc, reloc.offsets, up, k, updates)
-        deltas = np.asarray(reloc.deltas)
-        surfaces = [profile_surface_numpy(pe + ce, pn + cn, ph, ce, cn, reloc.half_cells, reloc.step, deltas,
-                                          reloc.zmap)[0] for ce, cn in ((est_e, est_n), (nav_e, nav_n))]
-        std = both_squares_std_numpy(surfaces[0], est_e, est_n, surfaces[1], nav_e, nav_n, reloc.half_cells, reloc.step,
-                                     min(pe.size, updates), reloc.sig_u)
-        if std > reloc.fix_std:
-            return False, nav_e, nav_n, 0.0
-    return second
+    second = match_surface_numpy(pe, pn, ph, nav_e, nav_n, reloc)
+    answer = decide_match_numpy(pe, pn, ph, nav_e, nav_n, pings, reloc, second)
+    if answer[0] and reloc.both_squares and both_squares_std_numpy(first, est_e, est_n, second, nav_e, nav_n,
+                                                                   reloc.half_cells, reloc.step, pings,
+                                                                   reloc.sig_u) > reloc.fix_std:
+        return False, nav_e, nav_n, 0.0
+    return answer
