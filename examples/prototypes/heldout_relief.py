@@ -110,14 +110,15 @@ def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) ->
     }
 
 
-# the flags that build a group of sets
+# the flags that build a group of sets, and every set by name
 GROUPS = {"--all": SETS, "--unseen": UNSEEN_SETS, "--section-17": SECTION_17_SETS, "--section-18": SECTION_18_SETS}
+ALL_SETS = {name: spec for group in GROUPS.values() for name, spec in group.items()}
 
 
 def main(out: Path, which: str = "first") -> None:
     out.mkdir(parents=True, exist_ok=True)
     z, dx, dy = read_dem()
-    first, centres, spacing, seed_range = {**SETS, **UNSEEN_SETS, **SECTION_17_SETS, **SECTION_18_SETS}[which]
+    first, centres, spacing, seed_range = ALL_SETS[which]
     scales = ((dx, dy), (spacing, spacing))
     seeds = iter(seed_range)
     k = first - 1
