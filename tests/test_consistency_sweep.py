@@ -14,6 +14,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
+from mutation_support import LATER_NEUTRAL  # the later defaults' neutral values, as YAML
 from tanbench.check import CheckOptions, compare
 from tanbench import store
 
@@ -31,8 +32,7 @@ methods: [tight-dvl]
 # this cell's verdict moves with the seeds, so the test checks the rule on the pinned realisation, not the filter)
 scenario: {particles: 2000, duration_s: 300, filter: {map_aware_likelihood: false, likelihood: gaussian,
                                                       loose_reopen_heading: navigation, loose_reopen_position: prior,
-                                                      loose_fix_correlation_s: 0,
-                                                      recovery_search_around: estimate}}
+                                                      """ + LATER_NEUTRAL + """}}
 tables:
   noise_model: {filter.measurement_noise_altitude_m: [1.0, 0.05]}
 """

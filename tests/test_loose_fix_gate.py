@@ -6,15 +6,12 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from mutation_support import LATER_NEUTRAL_FILTER as LATER_NEUTRAL  # the later defaults' neutral values
 from tanbench.config import Scenario
 from tanbench.methods import get, run_method
 from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
 from tanbench.simulation import simulate_vehicle
 from tanbench.sweep import load_sweep
-
-# the neutral values of the defaults adopted after these tests were written (docs/filters.md 16.4 and 18.2): a cell's
-# key holds every filter option, so the tests pin them to keep the keys, and so the seeds, they were written on
-LATER_NEUTRAL = {"loose_fix_correlation_s": 0.0, "recovery_search_around": "estimate"}
 
 
 def test_the_gate_is_an_option_off_by_default_and_needs_heading_offsets():
