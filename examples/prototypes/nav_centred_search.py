@@ -19,7 +19,7 @@ import sys
 import numpy as np
 
 from global_recovery import TIGHT, describe_pairs, four_rules
-from loose_fix_gate import write_rows
+from loose_fix_gate import _pinned, write_rows
 from tanbench.config import Scenario
 from tanbench.methods import get, run_method
 from tanbench.runner.seeds import keyed_filter_seed, keyed_vehicle_seed
@@ -36,9 +36,7 @@ SEARCH_AROUND = {"value": "estimate-then-navigation"}
 
 
 def with_second_square(scenario: Scenario) -> Scenario:
-    data = scenario.model_dump(mode="json")
-    data["filter"]["recovery_search_around"] = SEARCH_AROUND["value"]
-    return Scenario(**data)
+    return _pinned(scenario, recovery_search_around=SEARCH_AROUND["value"])
 
 
 def jobs(sweeps: list, roots: list | None, methods: list | None) -> list:
@@ -63,9 +61,7 @@ def jobs(sweeps: list, roots: list | None, methods: list | None) -> list:
 def as_run_for_sections_17_18(scenario: Scenario) -> Scenario:
     """The defaults sections 17 and 18 ran against: ``recovery_search_around: estimate`` (neutral; the default since
     section 18.1), so the pairs keep their keys and seeds."""
-    data = scenario.model_dump(mode="json")
-    data["filter"]["recovery_search_around"] = "estimate"
-    return Scenario(**data)
+    return _pinned(scenario, recovery_search_around="estimate")
 
 
 def _pair(job):
