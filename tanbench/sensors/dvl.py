@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tanbench.numpy_stream import standard_normal
+
 
 def measure_velocity(vel_body: np.ndarray, ping_index: np.ndarray, scale_error: float,
                      noise_mps: float, rng, lost: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -18,7 +20,7 @@ def measure_velocity(vel_body: np.ndarray, ping_index: np.ndarray, scale_error: 
     measured before them is held through them (the first ping is always kept).
     """
     scale = rng.uniform(-1.0, 1.0) * scale_error
-    pings = vel_body[ping_index] * (1.0 + scale) + noise_mps * rng.standard_normal((ping_index.size, 3))
+    pings = vel_body[ping_index] * (1.0 + scale) + noise_mps * standard_normal(rng, (ping_index.size, 3))
     if lost is not None:
         valid = ~lost
         valid[0] = True

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from tanbench.numpy_stream import standard_normal
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H  # noqa: F401 - re-exported for the sensors
 
 MG = 9.80665e-3  # m/s^2
@@ -58,8 +59,8 @@ def first_order_recursion_numpy(w: np.ndarray, a: float) -> np.ndarray:
 def gauss_markov(n: int, dt: float, sigma: float, tau: float, rng, axes: int = 3) -> np.ndarray:
     """First-order Gauss-Markov samples (n, axes), stationary from the start."""
     a = math.exp(-dt / tau)
-    w = rng.standard_normal((n, axes)) * sigma * math.sqrt(1.0 - a * a)
-    w[0] = rng.standard_normal(axes) * sigma
+    w = standard_normal(rng, (n, axes)) * sigma * math.sqrt(1.0 - a * a)
+    w[0] = standard_normal(rng, axes) * sigma
     return first_order_recursion(w, a)
 
 
@@ -70,10 +71,10 @@ def measure_imu(omega_ib, f_body, dt, sensors, rng):
     g_turn_on = rng.uniform(-1, 1, 3) * sensors.gyro_turn_on_bias_deg_h * DEG_PER_H
     g_in_run = gauss_markov(n, dt, sensors.gyro_bias_instability_deg_h * DEG_PER_H,
                             sensors.gyro_bias_corr_time_s, rng)
-    g_noise = rng.standard_normal((n, 3)) * sensors.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(rate)
+    g_noise = standard_normal(rng, (n, 3)) * sensors.gyro_arw_deg_sqrt_h * DEG_PER_SQRT_H * math.sqrt(rate)
     a_turn_on = rng.uniform(-1, 1, 3) * sensors.accel_turn_on_bias_mg * MG
     a_in_run = gauss_markov(n, dt, sensors.accel_bias_instability_mg * MG, sensors.accel_bias_corr_time_s, rng)
-    a_noise = rng.standard_normal((n, 3)) * sensors.accel_noise_mg_sqrt_hz * MG * math.sqrt(rate)
+    a_noise = standard_normal(rng, (n, 3)) * sensors.accel_noise_mg_sqrt_hz * MG * math.sqrt(rate)
     gyro_bias = g_turn_on + g_in_run
     accel_bias = a_turn_on + a_in_run
     gyro = omega_ib + gyro_bias + g_noise

@@ -37,6 +37,7 @@ import numba as nb
 import numpy as np
 
 from tanbench.arrays import read_only
+from tanbench.numpy_stream import standard_normal
 from tanbench.sensors.faults import add_outliers
 from tanbench.sensors.raycast import cast_rays
 from tanbench.vehicle.attitude import dcm_body_to_nav, dcm_body_to_nav_numpy
@@ -133,7 +134,7 @@ def measure_swath(sensors, faults, truth_map, truth, ping_idx, swath, lost, angl
     s, fl = sensors, faults
     rows, nominal_ranges = swath
     angles, _ = sensor_fan(s)
-    unit_angle = angle_rng.standard_normal((rows.size, angles.size))
+    unit_angle = standard_normal(angle_rng, (rows.size, angles.size))
     if s.multibeam_angle_noise_deg > 0:
         at = ping_idx[rows]
         pointed = np.radians(angles) + math.radians(s.multibeam_angle_noise_deg) * unit_angle
@@ -143,7 +144,7 @@ def measure_swath(sensors, faults, truth_map, truth, ping_idx, swath, lost, angl
         ranges = np.array(nominal_ranges)
     if fl.sound_speed_scale_error:
         ranges = ranges * (1.0 + fl.sound_speed_scale_error)
-    ranges = ranges + s.multibeam_range_noise_m * range_rng.standard_normal(ranges.shape)
+    ranges = ranges + s.multibeam_range_noise_m * standard_normal(range_rng, ranges.shape)
     ranges = add_outliers(ranges, fl.outlier_fraction, s.max_range_m, outlier_rng)
     out = np.full((ping_idx.size, angles.size), np.nan)
     out[rows] = ranges

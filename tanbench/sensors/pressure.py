@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from tanbench.numpy_stream import standard_normal
+
 
 def measure_depth(up: np.ndarray, error_percent: float, full_scale_m: float, rng) -> np.ndarray:
     """Pressure-sensor depth (positive down), m: white noise of error_percent of full scale."""
-    return -up + (error_percent / 100.0) * full_scale_m * rng.standard_normal(up.shape)
+    return -up + (error_percent / 100.0) * full_scale_m * standard_normal(rng, up.shape)

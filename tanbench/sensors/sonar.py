@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from tanbench.arrays import read_only
+from tanbench.numpy_stream import uniform
 from tanbench.sensors.raycast import cast_rays
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
 
@@ -65,4 +66,4 @@ def true_ranges(truth_map, pos, pitch, roll, yaw, beams, beamwidth_deg=0.0, max_
 
 def measure_ranges(true_range: np.ndarray, noise_m: float, rng) -> np.ndarray:
     """Add uniform noise of half-width ``noise_m`` (common unit draws across noise levels)."""
-    return true_range + noise_m * rng.uniform(-1.0, 1.0, true_range.shape)
+    return true_range + noise_m * uniform(rng, -1.0, 1.0, true_range.shape)
