@@ -500,6 +500,24 @@ def yardstick_ns(path, particles: int = 3000) -> float | None:
     return float(module.measure(M=particles))
 
 
+def compile_target() -> str:
+    """The CPU numba compiles the kernels for, and the widest vectors they may use: the host's, unless
+    ``NUMBA_CPU_NAME`` / ``NUMBA_CPU_FEATURES`` say otherwise. The kernels' figures depend on it: tight-dvl
+    against the yardstick was 0.33 with AVX-512 and 0.45-0.47 compiled for AVX2 on the same machine
+    (docs/speed.md, "seventeenth session")."""
+    import llvmlite.binding as llvm
+    from numba.core import config
+
+    name = config.CPU_NAME or llvm.get_host_cpu_name()
+    if config.CPU_FEATURES is not None:
+        return f"{name}, features {config.CPU_FEATURES!r} (NUMBA_CPU_FEATURES)"
+    if config.CPU_NAME is not None:
+        return f"{name} (NUMBA_CPU_NAME) with its own default features"
+    features = llvm.get_host_cpu_features()
+    widest = "AVX-512" if features.get("avx512f") else "AVX2" if features.get("avx2") else "neither AVX2 nor AVX-512"
+    return f"{name} (this host), {widest}"
+
+
 def run_bench(particles: int = 3000, repeats: int = 3, methods=None, yardstick=None) -> dict:
     """Measure and return every figure as a dict. With ``yardstick`` (a file with a ``measure()``),
     tight-dvl's filter and the yardstick's step are timed in turn in this process, ``repeats`` times each."""
@@ -514,7 +532,8 @@ def run_bench(particles: int = 3000, repeats: int = 3, methods=None, yardstick=N
         for _ in range(repeats):
             tight = run_figures("tight-dvl", particles, 1)["ns_per_unit_cpu"]
             rounds.append({"tight_dvl_ns": tight, "yardstick_ns": yardstick_ns(yardstick, particles)})
-    return {"particles": particles, "updates": 1191, "runs": runs, "steps": reference_steps(particles),
+    return {"particles": particles, "updates": 1191, "target": compile_target(), "runs": runs,
+            "steps": reference_steps(particles),
             "kernels": kernel_breakdown(particles), "fixed": fixed_costs(),
             "multibeam": multibeam_likelihood(particles), "yardstick": rounds}
 

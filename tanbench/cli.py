@@ -787,6 +787,7 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
         return
     typer.echo(f"area A, 10 m map, 4 DVL beams, {figures['particles']} particles, {figures['updates']} updates "
                f"(ns per cost unit: particle-step, grid cell, match or update; thread CPU / wall; best of {repeats})")
+    typer.echo(f"  kernels compiled for {figures['target']}")
     numpy_cpu = {r["method"]: r["ns_per_unit_cpu"] for r in figures["runs"] if r["random_numbers"] == "numpy"}
     for r in figures["runs"]:
         frac = "" if r["resampled_fraction"] is None else f"  resampled {100 * r['resampled_fraction']:.0f} %"
