@@ -46,6 +46,6 @@ def ekf_steps(scenario) -> float:
 
 EKF_DVL = register(MethodRecord(
     name="ekf-dvl", seed_id=7, builtin=True, run=run_ekf_dvl, states=("east", "north", "heading", "gyro_bias_z"),
-    series=("update_rejected", "bias_z_deg_h"), options=EkfOptions, cost_ns=5500.0, cost_units=ekf_steps,
+    series=("update_rejected", "bias_z_deg_h"), options=EkfOptions, cost_ns=947.0, cost_units=ekf_steps,
     summary="an iterated extended Kalman filter with local terrain linearisation (SITAN), 4 DVL beams",
     color="tab:brown", linestyle=":"))

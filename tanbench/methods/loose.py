@@ -137,4 +137,4 @@ LOOSE_DVL = register(MethodRecord(
     series=("position_fix", "healthy", "fix_accepted", "fix_rejected", "var_yaw", "bias_z_deg_h"),
     summary="loosely coupled TAN: a position-only particle filter whose terrain fixes go to the navigation "
             "system's Kalman filter (position, heading, gyro bias), closed loop (filter.loose_architecture)",
-    cost_ns=68.0, color="tab:purple", linestyle=":", bound=("dvl", "position")))
+    cost_ns=40.9, color="tab:purple", linestyle=":", bound=("dvl", "position")))

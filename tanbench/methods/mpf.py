@@ -43,7 +43,7 @@ def run_mpf_dvl(ctx: MethodContext) -> MethodOutput:
 MPF_DVL = register(MethodRecord(
     name="mpf-dvl", seed_id=6, builtin=True, run=run_mpf_dvl,
     states=("east", "north", "heading", "depth_bias", "gyro_bias_z"),
-    series=("depth_bias_m", "var_depth_bias", "bias_z_deg_h", "var_bias_z"), options=MpfOptions, cost_ns=171.0,
+    series=("depth_bias_m", "var_depth_bias", "bias_z_deg_h", "var_bias_z"), options=MpfOptions, cost_ns=86.5,
     summary="a marginalized particle filter: particles for position and yaw, a Kalman filter per particle for "
             "the depth (tide) bias and the z-gyro bias, weighted by the 4 DVL beams",
     color="tab:orange", linestyle="--"))

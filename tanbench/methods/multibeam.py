@@ -88,12 +88,12 @@ def pmf_beam_steps(scenario) -> float:
 
 TIGHT_MBE = register(MethodRecord(
     name="tight-mbe", seed_id=28, builtin=True, run=run_tight_mbe, states=TIGHT_STATES,
-    series=TIGHT_SERIES + ("var_yaw",), options=SwathOptions, cost_ns=10.0, cost_units=particle_beam_steps,
+    series=TIGHT_SERIES + ("var_yaw",), options=SwathOptions, cost_ns=4.2, cost_units=particle_beam_steps,
     summary="the paper's tightly coupled 8-state particle filter weighted by the multibeam swath "
             "(sensors.multibeam_*)",
     color="tab:purple", linestyle="--", bound=("mbe", "full")))
 PMF_MBE = register(MethodRecord(
     name="pmf-mbe", seed_id=29, builtin=True, run=run_pmf_mbe, states=("east", "north", "heading"),
-    series=("live_slices",), options=PmfSwathOptions, cost_ns=10.0, cost_units=pmf_beam_steps,
+    series=("live_slices",), options=PmfSwathOptions, cost_ns=4.7, cost_units=pmf_beam_steps,
     summary="the point-mass filter (position x heading bank) weighted by the multibeam swath",
     color="tab:brown", linestyle="-"))

@@ -72,11 +72,11 @@ def grid_steps(name: str):
 
 PMF_DVL = register(MethodRecord(
     name="pmf-dvl", seed_id=4, builtin=True, run=run_pmf_dvl, states=("east", "north", "heading"),
-    series=("live_slices",), options=PmfOptions, cost_ns=47.0, cost_units=grid_steps("pmf-dvl"),
+    series=("live_slices",), options=PmfOptions, cost_ns=27.3, cost_units=grid_steps("pmf-dvl"),
     summary="a point-mass (grid) filter over position with a bank of heading slices, weighted by the 4 DVL beams",
     color="tab:green", linestyle="-"))
 PMF_SBE = register(MethodRecord(
     name="pmf-sbe", seed_id=5, builtin=True, run=run_pmf_sbe, states=("east", "north", "heading"),
-    series=("live_slices",), options=PmfOptions, cost_ns=44.0, cost_units=grid_steps("pmf-sbe"),
+    series=("live_slices",), options=PmfOptions, cost_ns=26.2, cost_units=grid_steps("pmf-sbe"),
     summary="the point-mass filter weighted by the single-beam altimeter",
     color="tab:olive", linestyle="-."))

@@ -50,7 +50,7 @@ def profile_matches(scenario) -> float:
 
 TERCOM_DVL = register(MethodRecord(
     name="tercom-dvl", seed_id=8, builtin=True, run=run_tercom_dvl, states=("east", "north", "heading"),
-    series=("position_fix",), options=TercomOptions, cost_ns=26.0, cost_units=profile_matches,
+    series=("position_fix",), options=TercomOptions, cost_ns=14.5, cost_units=profile_matches,
     summary="TERCOM: batch MSD/MAD correlation of the last N pings' DVL profile over a position-heading window; "
             "fixes correct the navigation solution",
     color="tab:gray", linestyle="-."))

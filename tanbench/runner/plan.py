@@ -29,7 +29,7 @@ SERIES_MODES = ("none", "summary", "full")
 # Costs on one uncontended core of the 2-core development machine; the estimate divides
 # them by the share of a core each process gets at the current load average.
 # (each method's cost per particle-step is in its registry record: tanbench.methods.registry)
-SIMULATION_S = 0.1  # one run's vehicle data (1190 s at 100 Hz, ray-cast sonar)
+SIMULATION_S = 0.022  # one run's vehicle data (1190 s at 100 Hz; the world's ray-cast sonar is per world)
 # numba compiling a sweep's kernels on a cold on-disk cache: thread CPU seconds, one method after another
 # in this order in one process on the 2-core dev machine: the run's simulation (strapdown navigation, IMU
 # errors), then each method family's kernels (a family: the methods named FAMILY-sensor, which run the same
@@ -70,8 +70,12 @@ COMPILE_LOAD_S = 1.3
 # a helper process starting (spawn, imports: 1.5-1.6 s CPU) and the parent loading the kernels it
 # compiled afterwards (0.1 s), measured 3 Dec 2026
 COMPILE_JOIN_S = 1.7
-WARM_START_S = 1.5  # a worker process importing tanbench and loading the cached kernels
-FIXED_S = 3.0  # validation, worlds, merging and tables around the tasks
+# a worker forked from the parent (its imports done) loading the cached kernels: `make bench`'s fixed costs,
+# 0.42-0.48 s of CPU (5 Dec 2026)
+WARM_START_S = 0.5
+# around the tasks: the parent's imports (0.81-0.86 s, `make bench`), validating the worlds (0.57 s) and merging
+# and the tables (0.56 s; a py-spy profile of the CI-size sweep's parent), 5 Dec 2026
+FIXED_S = 2.0
 LARGE_SWEEP_CELLS = 2000  # `plan`, `validate` and `run` warn past this many cells
 
 
