@@ -35,15 +35,29 @@ def test_plan_estimate_includes_compilation_and_the_load():
             planning.COMPILE_FAMILY_S["tight"], planning.COMPILE_ALONE_S["loose"]))
     share_compile = min(1.0, cores / processes)
     speed = planning.machine_speed_factor()  # this machine's core against the constants' (measured once)
-    assert idle["compile"] == pytest.approx(side * speed / share_compile + planning.WARM_START_S / share_all)
+    assert idle["compile"] == pytest.approx(side * speed / share_compile + planning.worker_start_s() / share_all)
     assert idle["tasks"] == pytest.approx(tasks / (workers * share_all))
     assert idle["fixed"] == pytest.approx(planning.FIXED_S / share_one)
     warm = plan.estimate_parts(load=0.0, warm=True)
-    assert warm["compile"] == pytest.approx(planning.WARM_START_S / share_all)
+    assert warm["compile"] == pytest.approx(planning.worker_start_s() / share_all)
     busy = plan.estimate_parts(load=8.0, warm=False)
     assert busy["tasks"] == pytest.approx(tasks / (workers * min(1.0, cores / (8.0 + workers))))
     assert busy["compile"] > idle["compile"] and busy["fixed"] > idle["fixed"]
     assert plan.estimate_seconds() == pytest.approx(sum(plan.estimate_parts().values()), rel=0.5)
+
+
+def test_a_spawned_worker_is_counted_with_its_imports(monkeypatch):
+    """Workers are forked on Linux (their imports done) and spawned elsewhere (executors.local_context): the
+    estimate's worker start follows."""
+    sweep = load_sweep(ROOT / "configs" / "quick.yaml")
+    plan = planning.make_plan(sweep, Path("/nonexistent/results"), workers=2)
+    monkeypatch.setattr(planning.sys, "platform", "linux")
+    forked = plan.estimate_parts(load=0.0, warm=True)["compile"]
+    monkeypatch.setattr(planning.sys, "platform", "darwin")
+    spawned = plan.estimate_parts(load=0.0, warm=True)["compile"]
+    share_all = min(1.0, planning.default_workers() / min(2, len(plan.tasks)))
+    assert forked == pytest.approx(planning.WARM_START_S / share_all)
+    assert spawned == pytest.approx(planning.SPAWN_START_S / share_all) and spawned > forked
 
 
 def test_the_compile_estimate_follows_the_machine_speed(monkeypatch):

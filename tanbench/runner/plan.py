@@ -11,6 +11,7 @@ import heapq
 import json
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,8 +72,10 @@ COMPILE_LOAD_S = 1.3
 # compiled afterwards (0.1 s), measured 3 Dec 2026
 COMPILE_JOIN_S = 1.7
 # a worker forked from the parent (its imports done) loading the cached kernels: `make bench`'s fixed costs,
-# 0.42-0.48 s of CPU (5 Dec 2026)
+# 0.42-0.48 s of CPU (5 Dec 2026); where workers are spawned (not Linux: executors.local_context) a worker also
+# imports: 1.13-1.32 s there
 WARM_START_S = 0.5
+SPAWN_START_S = 1.3
 # around the tasks: the parent's imports (0.81-0.86 s, `make bench`), validating the worlds (0.57 s) and merging
 # and the tables (0.56 s; a py-spy profile of the CI-size sweep's parent), 5 Dec 2026
 FIXED_S = 2.0
@@ -300,7 +303,7 @@ class Plan:
         share_one = min(1.0, cores / (load + 1))  # the parent alone (validation, tables)
         share_compile = min(1.0, cores / (load + processes))  # the processes compiling side by side
         share_all = min(1.0, cores / (load + workers))  # every worker busy
-        start = compile_s / share_compile + WARM_START_S / share_all
+        start = compile_s / share_compile + worker_start_s() / share_all
         return {"compile": start,
                 "tasks": longest_first_makespan([self.task_cost(t) for t in tasks], workers) / share_all,
                 "fixed": FIXED_S / share_one}
@@ -360,6 +363,12 @@ def _speed_probe_work(items: int) -> int:
         d = {"a": i, "b": (i, i + 1), "c": [i] * 3}
         total += len(d["c"]) + d["b"][1] - d["a"] + len(f"v{i}")
     return total
+
+
+def worker_start_s() -> float:
+    """A worker's start with a warm cache: forked on Linux (:data:`WARM_START_S`), spawned elsewhere
+    (:data:`SPAWN_START_S`), as ``executors.local_context`` starts them."""
+    return WARM_START_S if sys.platform.startswith("linux") else SPAWN_START_S
 
 
 @functools.lru_cache(maxsize=1)
