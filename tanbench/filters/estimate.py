@@ -50,6 +50,16 @@ def _finish_moments(a, b, row, w, ref, angle, m4):
     return (a0 + a1) + (a2 + a3), (b0 + b1) + (b2 + b3)
 
 
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _finish_cross(a, xe, xn, w, ref_e, ref_n, m4):
+    """The four chains' sums ``a`` of w (xe - ref_e) (xn - ref_n) with the elements after the first ``m4``
+    added to chain 0, then the chains added in the fixed order."""
+    a0, a1, a2, a3 = a
+    for j in range(m4, w.shape[0]):
+        a0 += w[j] * (xe[j] - ref_e) * (xn[j] - ref_n)
+    return (a0 + a1) + (a2 + a3)
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def weighted_moments(row, w, ref, angle):
     """(sum w d, sum w d^2) of the deviations d = row - ref (wrapped, if ``angle``): four chains as
@@ -92,10 +102,7 @@ def weighted_cross(xe, xn, w, ref_e, ref_n):
     last elements."""
     m = w.shape[0]
     m4 = m - m % 4
-    a0, a1, a2, a3 = lane_cross(xe, xn, w, ref_e, ref_n, m4 // 4)
-    for j in range(m4, m):
-        a0 += w[j] * (xe[j] - ref_e) * (xn[j] - ref_n)
-    return (a0 + a1) + (a2 + a3)
+    return _finish_cross(lane_cross(xe, xn, w, ref_e, ref_n, m4 // 4), xe, xn, w, ref_e, ref_n, m4)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -109,9 +116,7 @@ def weighted_cross_scalar(xe, xn, w, ref_e, ref_n):
         a1 += w[j + 1] * (xe[j + 1] - ref_e) * (xn[j + 1] - ref_n)
         a2 += w[j + 2] * (xe[j + 2] - ref_e) * (xn[j + 2] - ref_n)
         a3 += w[j + 3] * (xe[j + 3] - ref_e) * (xn[j + 3] - ref_n)
-    for j in range(m4, m):
-        a0 += w[j] * (xe[j] - ref_e) * (xn[j] - ref_n)
-    return (a0 + a1) + (a2 + a3)
+    return _finish_cross((a0, a1, a2, a3), xe, xn, w, ref_e, ref_n, m4)
 
 
 @nb.njit(cache=True, fastmath=FASTMATH)

@@ -157,6 +157,11 @@ def _lanes(builder, vector):
     return [builder.extract_element(vector, ir.Constant(ir.IntType(32), lane)) for lane in range(4)]
 
 
+def _load_quad(builder, array, first):
+    """The four doubles of ``array`` (a ``make_array`` proxy) from element ``first`` on, as one vector."""
+    return builder.load(builder.bitcast(builder.gep(array.data, [first]), V4.as_pointer()), align=8)
+
+
 def _lane_loop(context, builder, signature, args, narrays, sums, step):
     """Codegen of a lane sum: ``narrays`` array arguments, then the other arguments (scalars, last
     ``quads``); ``step(builder, loaded vectors, scalar args)`` gives the ``sums`` vectors to add at
@@ -166,8 +171,7 @@ def _lane_loop(context, builder, signature, args, narrays, sums, step):
     scalars = [_broadcast(builder, v) for v in args[narrays:-1]]
     with cgutils.for_range(builder, args[-1]) as loop:
         first = builder.mul(loop.index, ir.Constant(loop.index.type, 4))
-        vectors = [builder.load(builder.bitcast(builder.gep(a.data, [first]), V4.as_pointer()), align=8)
-                   for a in arrays]
+        vectors = [_load_quad(builder, a, first) for a in arrays]
         for acc, term in zip(accs, step(builder, vectors, scalars)):
             builder.store(builder.fadd(builder.load(acc), term), acc)
     lanes = [v for acc in accs for v in _lanes(builder, builder.load(acc))]
@@ -266,16 +270,14 @@ def lane_first_max(typingctx, a, quads):
         where = cgutils.alloca_once_value(builder, ir.Constant(iv4, [-1] * 4))
         with cgutils.for_range(builder, args[1]) as loop:
             first = builder.mul(loop.index, ir.Constant(loop.index.type, 4))
-            v = builder.load(builder.bitcast(builder.gep(arr.data, [first]), V4.as_pointer()), align=8)
+            v = _load_quad(builder, arr, first)
             index = builder.add(_broadcast(builder, first, iv4), ir.Constant(iv4, [0, 1, 2, 3]))
             m = builder.load(best)
             greater = builder.fcmp_ordered(">", v, m)
             builder.store(builder.select(greater, v, m), best)
             builder.store(builder.select(greater, index, builder.load(where)), where)
-        values = _lanes(builder, builder.load(best))
-        w = builder.load(where)
-        indices = [builder.extract_element(w, ir.Constant(ir.IntType(32), lane)) for lane in range(4)]
-        return context.make_tuple(builder, signature.return_type, values + indices)
+        lanes = _lanes(builder, builder.load(best)) + _lanes(builder, builder.load(where))
+        return context.make_tuple(builder, signature.return_type, lanes)
 
     return types.Tuple([types.float64] * 4 + [types.int64] * 4)(a, types.intp), codegen
 
