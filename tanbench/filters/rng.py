@@ -156,6 +156,15 @@ def _xoshiro_step(s0, s1, s2, s3):
 
 
 @nb.njit(cache=True, inline="always")
+def _step_lane(lanes, lane):
+    """Lane ``lane``'s next word, its state (words ``lane``, ``LANES + lane``, ``2 LANES + lane`` and
+    ``3 LANES + lane`` of ``lanes``) stepped."""
+    word, lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane] = \
+        _xoshiro_step(lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane])
+    return word
+
+
+@nb.njit(cache=True, inline="always")
 def next_u64(s):
     """One xoshiro256++ step on state ``s`` (uint64[4], updated in place); the output word."""
     result, s[0], s[1], s[2], s[3] = _xoshiro_step(s[0], s[1], s[2], s[3])
@@ -206,8 +215,7 @@ def lane_words(words, out):
     for r in range(out.shape[0] // LANES):
         base = r * LANES
         for lane in range(LANES):
-            out[base + lane], lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane] = \
-                _xoshiro_step(lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane])
+            out[base + lane] = _step_lane(lanes, lane)
     for k in range(LANE_WORDS):
         words[k] = lanes[k]
 
@@ -388,8 +396,7 @@ def lane_normals(words, s, out):
     for r in range(n // LANES):
         base = r * LANES
         for lane in range(LANES):
-            made[lane], lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane] = \
-                _xoshiro_step(lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane])
+            made[lane] = _step_lane(lanes, lane)
         for lane in range(LANES):
             u = made[lane]
             w[base + lane] = u
@@ -400,8 +407,7 @@ def lane_normals(words, s, out):
     base = n - n % LANES
     if base < n:  # a last round, partly used
         for lane in range(LANES):
-            w[base + lane], lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane] = \
-                _xoshiro_step(lanes[lane], lanes[LANES + lane], lanes[2 * LANES + lane], lanes[3 * LANES + lane])
+            w[base + lane] = _step_lane(lanes, lane)
         for j in range(base, n):
             out[j], flag = _rectangle(w[j])
             bits[j >> 6] |= np.uint64(flag) << np.uint64(j & 63)
