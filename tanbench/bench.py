@@ -34,10 +34,11 @@ from tanbench.filters.estimate import weighted_estimate, weighted_estimate_numpy
 from tanbench.filters.likelihood import Likelihood, beam_vectors, likelihood_grid, likelihood_of
 from tanbench.filters.propagate import DIST_PARTICLE, propagate_loose, propagate_loose_numpy, propagate_tight, propagate_tight_numpy
 from tanbench.filters.resample import REG_LIU_WEST, SYSTEMATIC, add_log_weights, apply_resample, normalise_with_ess, normalize_log_weights, normalize_log_weights_numpy, regularise, resample_indices, resample_indices_numpy, shrink_jitter, shrink_jitter_numpy
-from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals
+from tanbench.filters.rng import FastRng, fill_normals
 from tanbench.filters.trig import attitude_reference
 from tanbench.methods import get, method_context, run_method
 from tanbench.methods.registry import builtin_names, names
+from tanbench.numpy_stream import Pcg64Stream
 from tanbench.runner.engine import cell_columns, store_result
 from tanbench.runner.plan import make_plan
 from tanbench.runner.resume import ResumeState

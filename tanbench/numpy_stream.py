@@ -105,8 +105,6 @@ def pcg64_standard_normal(w):
     return _pcg64_normal_slow(w, idx, rabs, x)
 
 
-
-
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def pcg64_fill(w, out, normal, low, high):
     """numpy's standard normals (or uniforms in [low, high)) from the PCG64 words ``w``, in order."""
@@ -136,8 +134,9 @@ class Pcg64Stream:
     Generator's ``standard_normal()`` and ``uniform(low, high)`` would give, in order, its state
     advanced as if it had drawn them. Holds the Generator (whose memory it uses)."""
 
-    def __init__(self, generator: np.random.Generator):
-        address = pcg64_words_address(generator)
+    def __init__(self, generator: np.random.Generator, address: int | None = None):
+        """``address``: the Generator's :func:`pcg64_words_address`, when the caller has already found it."""
+        address = pcg64_words_address(generator) if address is None else address
         if address is None:
             raise ValueError("Pcg64Stream needs a numpy Generator on PCG64")
         self.generator = generator
@@ -190,22 +189,26 @@ def _stream_fill(stream, out, normal, low, high):
     pcg64_fill(stream.state, out, normal, low, high)
 
 
-def _draw(generator: np.random.Generator, shape, normal: bool, low: float, high: float) -> np.ndarray:
+def pcg64_stream(generator: np.random.Generator) -> Pcg64Stream | None:
+    """A :class:`Pcg64Stream` on ``generator``, or None if it is not on PCG64 (its layout checked once)."""
+    address = pcg64_words_address(generator)
+    return None if address is None else Pcg64Stream(generator, address)
+
+
+def _draw(stream: Pcg64Stream, shape, normal: bool, low: float, high: float) -> np.ndarray:
     out = np.empty(shape)
-    _stream_fill(Pcg64Stream(generator), out.reshape(-1), normal, float(low), float(high))
+    _stream_fill(stream, out.reshape(-1), normal, float(low), float(high))
     return out
 
 
 def standard_normal(generator: np.random.Generator, shape) -> np.ndarray:
     """``generator.standard_normal(shape)`` (float64, C order): the same numbers and the same state after,
     drawn inline when the Generator is on PCG64 (by the Generator itself otherwise)."""
-    if pcg64_words_address(generator) is None:
-        return generator.standard_normal(shape)
-    return _draw(generator, shape, True, 0.0, 1.0)
+    stream = pcg64_stream(generator)
+    return generator.standard_normal(shape) if stream is None else _draw(stream, shape, True, 0.0, 1.0)
 
 
 def uniform(generator: np.random.Generator, low: float, high: float, shape) -> np.ndarray:
     """``generator.uniform(low, high, shape)`` (float64, C order), as :func:`standard_normal` draws it."""
-    if pcg64_words_address(generator) is None:
-        return generator.uniform(low, high, shape)
-    return _draw(generator, shape, False, low, high)
+    stream = pcg64_stream(generator)
+    return generator.uniform(low, high, shape) if stream is None else _draw(stream, shape, False, low, high)

@@ -21,10 +21,11 @@ from tanbench.filters import likelihood as lik
 from tanbench.filters import propagate as prop
 from tanbench.filters import resample as rs
 from tanbench.filters.likelihood import Likelihood
-from tanbench.filters.rng import FastRng, Pcg64Stream, fill_normals, fill_uniforms, loop_rng
+from tanbench.filters.rng import FastRng, fill_normals, fill_uniforms, loop_rng
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import LEVEL, attitude_reference
 from tanbench.navigation.increments import compute_increments
+from tanbench.numpy_stream import Pcg64Stream
 from tanbench.options import LIKELIHOOD
 from tanbench.simulation import simulate_vehicle
 from tanbench.terrain import navigation_map

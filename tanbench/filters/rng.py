@@ -43,7 +43,7 @@ from numba.extending import intrinsic, overload
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.vecmath import bits_float, float_bits
-from tanbench.numpy_stream import Pcg64Stream, Pcg64StreamType, pcg64_fill, pcg64_words_address
+from tanbench.numpy_stream import Pcg64StreamType, pcg64_fill, pcg64_stream
 
 STATE_WORDS = 4  # one xoshiro256++ state
 LANES = 16  # lanes stepped together (4 AVX2 vectors of 4 words)
@@ -537,7 +537,8 @@ def loop_rng(rng: np.random.Generator, random_numbers: str):
     if random_numbers == "fast":
         return FastRng.from_seed(rng.bit_generator.seed_seq).state
     if random_numbers == "numpy":
-        return Pcg64Stream(rng) if pcg64_words_address(rng) is not None else rng
+        stream = pcg64_stream(rng)
+        return rng if stream is None else stream
     raise ValueError(f"unknown random_numbers {random_numbers!r}")
 
 
