@@ -134,11 +134,8 @@ def surface_likelihood_sums(msd, deltas, half_cells, step, pings, sig_u, mn):
 def surface_likelihood_moments(msd, deltas, half_cells, step, pings, sig_u):
     """Likelihood exp(-pings (msd - min) / (2 sig_u^2)) over the surface: its
     (mean dx, mean dy, var dx, var dy, mean delta, var delta)."""
-    mn = np.inf
-    for v in msd.ravel():
-        if v < mn:
-            mn = v
-    tot, sx, sy, sxx, syy, sd, sdd = surface_likelihood_sums(msd, deltas, half_cells, step, pings, sig_u, mn)
+    tot, sx, sy, sxx, syy, sd, sdd = surface_likelihood_sums(msd, deltas, half_cells, step, pings, sig_u,
+                                                             _best(msd)[0])
     if tot <= 0.0:
         return 0.0, 0.0, np.inf, np.inf, 0.0, np.inf
     mx = sx / tot
