@@ -6,7 +6,7 @@ TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
 PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d))) $(if $(wildcard results/zhou2017-fitted/sweep.yaml),--fitted results/zhou2017-fitted)
 
-.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations monterey realism heldout-relief multibeam criterion seafloors literal-family fitted check-numpy scaling compile-stages clean
+.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations tempering monterey realism heldout-relief multibeam criterion seafloors literal-family fitted check-numpy scaling compile-stages clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -136,6 +136,18 @@ paper-report: $(VENV)/.installed-run
 ablations: $(VENV)/.installed-run
 	rm -rf results/zhou2017-ablations
 	$(TB) run configs/zhou2017-ablations.yaml --out results/zhou2017-ablations --quiet --series none
+
+## tempering: the tight PFs with and without progressive correction (configs/tempering.yaml, docs/filters.md
+## section 22) into results/tempering (no series); the paired differences in results/tempering/ABLATION.md
+tempering: $(VENV)/.installed-run
+	rm -rf results/tempering
+	$(TB) run configs/tempering.yaml --out results/tempering --quiet --series none
+	(echo "# Progressive correction against none (docs/filters.md section 22)"; echo; \
+	 echo "## Final horizontal error (the counted statistic)"; echo; \
+	 $(TB) anatomy results/tempering --baseline off --digits 2; \
+	 echo "## Time-averaged horizontal error (reported, not counted)"; echo; \
+	 $(TB) anatomy results/tempering --baseline off --column mean_horizontal_error_m --digits 2) \
+	 > results/tempering/ABLATION.md
 
 ## monterey: the methods over the real Monterey Canyon tiles in ../shared/data/monterey (read in place)
 monterey: $(VENV)/.installed-run

@@ -14,6 +14,10 @@ and the mean difference (switched minus baseline) with a 95 % t interval:
 Beside the statistic (fixed in docs/model.md section 10.1), each row counts the runs
 that ended lost (the run's ``diverged`` flag: final error above the sweep's divergence
 threshold) in both cells, since a few lost runs carry most means here.
+
+Any ablation sweep laid out the same way is read alike: ``baseline`` names its baseline tables
+(``<cell>__<baseline>``; ``configs/tempering.yaml`` uses ``off``) and ``column`` the per-run
+metric compared (the final horizontal error unless given).
 """
 
 from __future__ import annotations
@@ -51,8 +55,10 @@ def difference_interval(switched: pd.Series, baseline: pd.Series, paired: bool, 
     return n, diff, float(diff - half), float(diff + half)
 
 
-def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_error_m") -> pd.DataFrame:
-    """One row per (key cell, switch, method); see the module docstring."""
+def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_error_m",
+                  baseline: str = BASELINE) -> pd.DataFrame:
+    """One row per (key cell, switch, method): ``column``'s means and their difference; see the module
+    docstring. ``baseline``: the switch the others are compared with."""
     cell_of = {}
     for cell in sweep.cells:
         for t in cell.tables:
@@ -63,8 +69,8 @@ def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_err
         if SEPARATOR not in table:
             continue
         name, switch = table.split(SEPARATOR, 1)
-        base_table = f"{name}{SEPARATOR}{BASELINE}"
-        if switch == BASELINE or base_table not in cell_of:
+        base_table = f"{name}{SEPARATOR}{baseline}"
+        if switch == baseline or base_table not in cell_of:
             continue
         base, other = cell_of[base_table], cell_of[table]
         paired = base.scenario.world_key() == other.scenario.world_key()
@@ -84,23 +90,26 @@ def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_err
     return pd.DataFrame(rows, columns=list(ANATOMY_COLUMNS))
 
 
-def anatomy_markdown(table: pd.DataFrame) -> str:
-    """The anatomy as one Markdown table per key cell: methods side by side."""
+def anatomy_markdown(table: pd.DataFrame, baseline: str = BASELINE, switch_to: str = "recommended",
+                     unit: str = "m", digits: int = 1) -> str:
+    """The anatomy as one Markdown table per key cell: methods side by side; ``baseline`` and
+    ``switch_to`` word the header, ``unit`` the column's; ``digits`` after the point."""
     out = []
     for cell, part in table.groupby("cell", sort=False):
         methods = list(dict.fromkeys(part["method"]))
         out += [f"**{cell}**", "",
-                "| switch to recommended | " + " | ".join(f"{m}: literal -> switched, diff [95 % CI] (m); lost runs"
+                f"| switch to {switch_to} | " + " | ".join(f"{m}: {baseline} -> switched, diff [95 % CI] ({unit}); "
+                                                         f"lost runs"
                                                          for m in methods) + " |",
                 "|---|" + "---|" * len(methods)]
         for switch, rows in part.groupby("switch", sort=False):
             cells = []
             for m in methods:
                 r = rows[rows["method"] == m].iloc[0]
-                ci = "" if np.isnan(r["ci_low_m"]) else f" [{r['ci_low_m']:+.1f}, {r['ci_high_m']:+.1f}]"
+                ci = "" if np.isnan(r["ci_low_m"]) else f" [{r['ci_low_m']:+.{digits}f}, {r['ci_high_m']:+.{digits}f}]"
                 lost = "" if r["baseline_lost"] < 0 else f"; {r['baseline_lost']} -> {r['switched_lost']}"
-                cells.append(f"{r['baseline_mean_m']:.1f} -> {r['switched_mean_m']:.1f}, "
-                             f"{r['diff_mean_m']:+.1f}{ci}{'' if r['paired'] else ' (unpaired)'}{lost}")
+                cells.append(f"{r['baseline_mean_m']:.{digits}f} -> {r['switched_mean_m']:.{digits}f}, "
+                             f"{r['diff_mean_m']:+.{digits}f}{ci}{'' if r['paired'] else ' (unpaired)'}{lost}")
             out.append(f"| {switch} | " + " | ".join(cells) + " |")
         out.append("")
     return "\n".join(out)

@@ -756,19 +756,29 @@ def predict(
 @app.command(help="The anatomy of an anatomy sweep: per key cell, switch and method, the mean paired difference "
                   "of the final error with a 95 % interval; writes DIR/tables/anatomy.csv and prints Markdown."
              + EXAMPLE.format("tanbench anatomy results/zhou2017-anatomy"))
-def anatomy(directory: Path = typer.Argument(..., help="Results directory of an anatomy sweep.")):
+def anatomy(directory: Path = typer.Argument(..., help="Results directory of an anatomy sweep."),
+            baseline: str = typer.Option("literal", "--baseline", help="The switch the others are compared with "
+                                                                       "(tables <cell>__<baseline>)."),
+            column: str = typer.Option("final_horizontal_error_m", "--column",
+                                       help="The per-run metric compared (a column of the runs)."),
+            digits: int = typer.Option(1, "--digits", min=0, max=6, help="Digits after the point.")):
     from tanbench.anatomy import anatomy_markdown, anatomy_table
     from tanbench.results import load
     from tanbench import store
     from tanbench.sweep import load_results_sweep
 
-    table = anatomy_table(load(directory), load_results_sweep(directory))
+    runs = load(directory)
+    if not runs.empty and column not in runs.columns:
+        raise TanbenchError(f"--column {column}: not a column of {directory}'s runs")
+    table = anatomy_table(runs, load_results_sweep(directory), column=column, baseline=baseline)
     if table.empty:
-        raise TanbenchError(f"{directory}: no <cell>__literal / <cell>__<switch> tables with runs "
+        raise TanbenchError(f"{directory}: no <cell>__{baseline} / <cell>__<switch> tables with runs "
                             f"(not an anatomy sweep, or not run yet)")
+    name = "anatomy" if (baseline, column) == ("literal", "final_horizontal_error_m") else f"anatomy-{baseline}-{column}"
     (directory / "tables").mkdir(parents=True, exist_ok=True)
-    store.write_text(table.to_csv(index=False), directory / "tables" / "anatomy.csv")
-    typer.echo(anatomy_markdown(table))
+    store.write_text(table.to_csv(index=False), directory / "tables" / f"{name}.csv")
+    switch_to = "recommended" if baseline == "literal" else "the switch"
+    typer.echo(anatomy_markdown(table, baseline, switch_to, "m" if column.endswith("_m") else column, digits))
 
 
 @app.command(help="Benchmark every method (ns per particle-step, run time, numpy ratio, kernels)."

@@ -537,6 +537,14 @@ class FilterSpec(_Strict):
         "slope", description="map-aware likelihood: the map's representation variance as a nearest-node lookup's "
                              "(map_slope_factor |grad h| res)^2, or bilinear interpolation's own error from the "
                              "map's second differences; plus the declared map error either way [slope]")
+    # progressive correction (docs/filters.md section 5 item 4 and section 22; filters/tempering.py)
+    tempering_ess: float = new_option(
+        0.0, ge=0, lt=1, description="tight PFs: progressive correction: an update that would leave fewer than this "
+                                     "fraction of the particles effective is applied in stages, each down to that "
+                                     "ESS, then resampled, regularised and weighed again [0: off]")
+    tempering_stages: int = new_option(
+        8, ge=2, le=64, description="tight PFs with tempering_ess above 0: most stages per update (the last applies "
+                                    "whatever remains)")
 
     @model_validator(mode="after")
     def _gates_need_heading_offsets(self):
@@ -552,6 +560,9 @@ class FilterSpec(_Strict):
             if value != neutral:
                 raise ValueError(f"filter.{name}: {_yaml_word(value)} needs filter.loose_heading_offsets: true "
                                  f"(set it to {_yaml_word(neutral)} without it)")
+        if self.tempering_ess > 0.0 and self.distance_innovation == "navigation":
+            raise ValueError("filter.tempering_ess above 0 needs filter.distance_innovation other than navigation "
+                             "(a tempering stage weighs resampled particles, whose propagated distances are gone)")
         if self.loose_fix_prior_fallback != "refuse" and self.loose_fix_prior_gate is None:
             raise ValueError("filter.loose_fix_prior_fallback: posterior needs filter.loose_fix_prior_gate "
                              "(the fixes it replaces are the ones that gate refuses)")

@@ -51,8 +51,10 @@ from tanbench.filters.posterior import REG_POSTERIOR, resample_posterior
 from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
 from tanbench.filters.recovery import recovery_square
 from tanbench.filters.relocalise import relocalise_around, relocaliser
-from tanbench.filters.resample import Resampling, add_log_weights, normalise_with_ess, resample_and_regularise, resampling_of
+from tanbench.filters.resample import (Resampling, _add_scaled, add_log_weights, max_log_weight, normalise_with_ess,
+                                      resample_and_regularise, resampling_of)
 from tanbench.filters.rng import fill_normals, rng_state, set_rng_state
+from tanbench.filters.tempering import tempering_fraction, tempering_of
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import attitude_reference
 from tanbench.navigation.increments import D0E, D0N
@@ -94,12 +96,13 @@ Readings = namedtuple("Readings", "propagation dt cloud_std div_reinit collapse_
 # the estimate is kept in ``bounds`` (e_min, e_max, n_min, n_max), off if e_min > e_max
 Guard = namedtuple("Guard", "spread_limit healthy_std bounds")
 
-# everything the loop is set with, and the navigation solution at the K updates: the (K-1, 12)
-# increments, yaw, pitch, roll and up (K,) and the (K-1, 4) Euler-step inputs
-TightSettings = namedtuple("TightSettings", "model rs div prior readings lik guard")
+# everything the loop is set with (``temper``: progressive correction, filters/tempering.py), and the
+# navigation solution at the K updates: the (K-1, 12) increments, yaw, pitch, roll and up (K,) and the
+# (K-1, 4) Euler-step inputs
+TightSettings = namedtuple("TightSettings", "model rs div prior readings lik guard temper")
 TightTrack = namedtuple("TightTrack", "inc yaw pitch roll up euler_in")
-# what the loop fills: est/var (K, 8), cov_en, ess, reinit, healthy (K,)
-TightOutputs = namedtuple("TightOutputs", "est var cov_en ess reinit healthy")
+# what the loop fills: est/var (K, 8), cov_en, ess, reinit, healthy and the update's tempering stages (K,)
+TightOutputs = namedtuple("TightOutputs", "est var cov_en ess reinit healthy stages")
 
 
 def divergence_of(f) -> Divergence:
@@ -168,14 +171,15 @@ def tight_settings(scenario, nmap, beams: int = 4) -> TightSettings:
     """Every bundle of :func:`tight_filter_loop` from ``scenario`` and its navigation map ``nmap``,
     for a filter weighted by ``beams`` beams."""
     f = scenario.filter
-    return TightSettings(tight_model_of(scenario), tight_resampling_of(f, beams),
-                         divergence_of(f), tight_prior_of(f), readings_of(f, scenario.sampling_time_s),
-                         likelihood_of(f), guard_of(f, nmap))
+    rs = tight_resampling_of(f, beams)
+    return TightSettings(tight_model_of(scenario), rs, divergence_of(f), tight_prior_of(f),
+                         readings_of(f, scenario.sampling_time_s), likelihood_of(f), guard_of(f, nmap),
+                         tempering_of(f, rs))
 
 
 def new_tight_outputs(k: int) -> TightOutputs:
     return TightOutputs(np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k), np.empty(k),
-                        np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64))
+                        np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), np.ones(k, dtype=np.int64))
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -278,8 +282,8 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
     ``stop_to_search`` (and ``reloc`` None) it returns at the first update where a diverged cloud would be
     searched for, before drawing anything there; returns that update, or -1 after the last one."""
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, _ = track
-    model, rs, div, prior, readings, lik, guard = settings
-    est, var, cov_en_out, ess_out, reinit_out, healthy_out = out
+    model, rs, div, prior, readings, lik, guard, temper = settings
+    est, var, cov_en_out, ess_out, reinit_out, healthy_out, stages_out = out
     m = x.shape[1]
     steps = ranges.shape[0]
     logw = np.zeros(m)
@@ -333,6 +337,32 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
                     walk_biases(x, noise_all[6], noise_all[7], model.sig_bias, lo)
             best = min(best, loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist, with_dist and k > 0,
                                                work_block(work, n), ll[lo:lo + n]))
+        # progressive correction (filters/tempering.py): while the rest of the update would leave fewer than
+        # temper.ess_fraction * M effective particles, apply the share that leaves that many, resample and
+        # regularise, and weigh the moved particles again; the update's last stage applies what remains
+        remaining = 1.0
+        stages_out[k] = 1
+        while stages_out[k] < temper.stages:
+            lam = tempering_fraction(logw, ll, remaining, temper.ess_fraction * m, w)
+            if lam >= remaining:
+                break
+            if lam > 0.0:
+                _add_scaled(logw, lam, ll)
+            ess = normalise_with_ess(logw, max_log_weight(logw), w)
+            weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)
+            spread = math.sqrt(v[E] + v[N])
+            if shared_rs is None:
+                resample_posterior(x, w, logw, ess, rng, temper.rs, YAW, mean[YAW], spread, uni, idx, scratch)
+            else:
+                resample_and_regularise(x, w, logw, ess, rng, temper.rs, N_TIGHT, spread, uni, idx, scratch)
+            remaining -= lam
+            for lo in range(0, m, block):
+                n = min(block, m - lo)
+                loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist_buf[:2 * n].reshape((2, n)), False,
+                                  work_block(work, n), ll[lo:lo + n])
+            stages_out[k] += 1
+        if remaining < 1.0:
+            _shift_scale(ll, 0.0, remaining)
         mx = add_log_weights(logw, ll)
         ess = normalise_with_ess(logw, mx, w)
         weighted_estimate(x, w, YAW, nav_yaw[k], mean, v, cov)
