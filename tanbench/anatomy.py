@@ -90,7 +90,7 @@ def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_err
     return pd.DataFrame(rows, columns=list(ANATOMY_COLUMNS))
 
 
-def anatomy_markdown(table: pd.DataFrame, baseline: str = BASELINE, switch_to: str = "recommended",
+def anatomy_markdown(table: pd.DataFrame, baseline: str = BASELINE, switch_to: str = "switch to recommended",
                      unit: str = "m", digits: int = 1) -> str:
     """The anatomy as one Markdown table per key cell: methods side by side; ``baseline`` and
     ``switch_to`` word the header, ``unit`` the column's; ``digits`` after the point."""
@@ -98,7 +98,7 @@ def anatomy_markdown(table: pd.DataFrame, baseline: str = BASELINE, switch_to: s
     for cell, part in table.groupby("cell", sort=False):
         methods = list(dict.fromkeys(part["method"]))
         out += [f"**{cell}**", "",
-                f"| switch to {switch_to} | " + " | ".join(f"{m}: {baseline} -> switched, diff [95 % CI] ({unit}); "
+                f"| {switch_to} | " + " | ".join(f"{m}: {baseline} -> switched, diff [95 % CI] ({unit}); "
                                                          f"lost runs"
                                                          for m in methods) + " |",
                 "|---|" + "---|" * len(methods)]

@@ -753,8 +753,9 @@ def predict(
     typer.echo(f"wrote {out / 'prediction.md'}, {out / 'prediction.parquet'}, {out / 'prediction.png'}")
 
 
-@app.command(help="The anatomy of an anatomy sweep: per key cell, switch and method, the mean paired difference "
-                  "of the final error with a 95 % interval; writes DIR/tables/anatomy.csv and prints Markdown."
+@app.command(help="The anatomy of an anatomy (or any ablation) sweep: per key cell, switch and method, the mean "
+                  "paired difference of the final error (or --column) from the <cell>__literal (or --baseline) "
+                  "table, with a 95 % interval; writes DIR/tables/anatomy*.csv and prints Markdown."
              + EXAMPLE.format("tanbench anatomy results/zhou2017-anatomy"))
 def anatomy(directory: Path = typer.Argument(..., help="Results directory of an anatomy sweep."),
             baseline: str = typer.Option("literal", "--baseline", help="The switch the others are compared with "
@@ -777,7 +778,7 @@ def anatomy(directory: Path = typer.Argument(..., help="Results directory of an 
     name = "anatomy" if (baseline, column) == ("literal", "final_horizontal_error_m") else f"anatomy-{baseline}-{column}"
     (directory / "tables").mkdir(parents=True, exist_ok=True)
     store.write_text(table.to_csv(index=False), directory / "tables" / f"{name}.csv")
-    switch_to = "recommended" if baseline == "literal" else "the switch"
+    switch_to = "switch to recommended" if baseline == "literal" else "switch"
     typer.echo(anatomy_markdown(table, baseline, switch_to, "m" if column.endswith("_m") else column, digits))
 
 

@@ -101,3 +101,14 @@ def test_the_loop_applies_an_informative_update_in_stages(monkeypatch, name):
 def test_the_stage_limit_holds(monkeypatch):
     _, on = _run_tight(monkeypatch, "tight-dvl", {"tempering_ess": 0.9, "tempering_stages": 2})
     assert on.stages.max() == 2 and on.stages.min() == 1
+
+
+def test_the_plan_charges_tempering():
+    from tanbench.config import Scenario
+    from tanbench.methods import get
+    from tanbench.methods.tight import TEMPERING_COST
+
+    off, on = Scenario(), Scenario(filter={"tempering_ess": 0.5})
+    for name in ("tight-dvl", "tight-sbe", "tight-mbe"):
+        assert get(name).estimate_seconds(on) == pytest.approx(TEMPERING_COST * get(name).estimate_seconds(off))
+    assert get("pmf-dvl").estimate_seconds(on) == get("pmf-dvl").estimate_seconds(off)

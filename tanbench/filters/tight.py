@@ -356,9 +356,9 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
             else:
                 resample_and_regularise(x, w, logw, ess, rng, temper.rs, N_TIGHT, spread, uni, idx, scratch)
             remaining -= lam
-            for lo in range(0, m, block):
-                n = min(block, m - lo)
-                loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist_buf[:2 * n].reshape((2, n)), False,
+            for lo in range(0, m, block):  # with_dist is False here: FilterSpec refuses tempering with the
+                n = min(block, m - lo)  # navigation's distances (and a literal False would compile the pass again)
+                loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist_buf[:2 * n].reshape((2, n)), with_dist,
                                   work_block(work, n), ll[lo:lo + n])
             stages_out[k] += 1
         if remaining < 1.0:

@@ -21,7 +21,7 @@ from tanbench.filters.swath import beam_information, every_kth, most_informative
 from tanbench.methods.api import MethodContext, MethodOutput
 from tanbench.methods.pmf import PmfOptions, grid_steps, run_pmf
 from tanbench.methods.registry import MethodRecord, register
-from tanbench.methods.tight import TIGHT_SERIES, TIGHT_STATES, run_tight
+from tanbench.methods.tight import TIGHT_SERIES, TIGHT_STATES, run_tight, tempering_cost
 from tanbench.options import MULTIBEAM_SELECTION, choices
 
 
@@ -73,9 +73,10 @@ def beams_weighed(scenario, name: str) -> int:
 
 
 def particle_beam_steps(scenario) -> float:
-    """Cost units of tight-mbe: particles x beams used x updates."""
+    """Cost units of tight-mbe: particles x beams used x updates (times the tight loop's :func:`tempering_cost`)."""
     duration = scenario.duration_s or 1190.0
-    return scenario.particles * max(beams_weighed(scenario, "tight-mbe"), 1) * duration / scenario.sampling_time_s
+    return (scenario.particles * max(beams_weighed(scenario, "tight-mbe"), 1) * duration / scenario.sampling_time_s
+            * tempering_cost(scenario))
 
 
 def pmf_beam_steps(scenario) -> float:

@@ -18,7 +18,7 @@ from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.tight import (TightSettings, TightTrack, init_tight, new_tight_outputs, tight_filter_loop,
                                     tight_settings)
 from tanbench.methods.api import MethodContext, MethodOutput
-from tanbench.methods.registry import MethodRecord, register
+from tanbench.methods.registry import MethodRecord, particle_steps, register
 from tanbench.navigation.increments import N_EULER, compute_euler_inputs
 from tanbench.units import DEG_PER_H
 
@@ -29,6 +29,21 @@ TIGHT_SERIES = ("var_pitch", "var_roll", "var_bias_x", "var_bias_z", "bias_x_deg
 # the Euler inputs' averaging window per propagation reading, seconds (0: the one IMU sample at the update;
 # euler-interval-start: the one sample at the interval's start)
 EULER_WINDOW_S = {"euler-last-second": 1.0, "euler-last-sample": 0.0, "euler-interval-start": 0.0}
+
+
+# the tight loop's cost with progressive correction (filter.tempering_ess above 0) over its cost without: the median
+# filter wall time of each cell of results/tempering over its untempered twin was 1.43-1.76 (docs/filters.md 22.1)
+TEMPERING_COST = 1.6
+
+
+def tempering_cost(scenario) -> float:
+    """The factor on a tight PF's cost units for ``filter.tempering_ess`` (the plan's estimate)."""
+    return TEMPERING_COST if scenario.filter.tempering_ess > 0.0 else 1.0
+
+
+def tight_particle_steps(scenario) -> float:
+    """Cost units of tight-dvl and tight-sbe: particles x updates, times :func:`tempering_cost`."""
+    return particle_steps(scenario) * tempering_cost(scenario)
 
 
 def euler_inputs_of(ctx: MethodContext) -> np.ndarray:
@@ -103,9 +118,9 @@ TIGHT_DVL = register(MethodRecord(
     series=TIGHT_SERIES + ("var_yaw",),
     summary="the paper's tightly coupled 8-state particle filter (position, attitude, two gyro biases), "
             "weighted by the 4 DVL beams",
-    cost_ns=41.6, color="tab:red", linestyle="--", bound=("dvl", "full")))
+    cost_ns=41.6, cost_units=tight_particle_steps, color="tab:red", linestyle="--", bound=("dvl", "full")))
 TIGHT_SBE = register(MethodRecord(
     name="tight-sbe", seed_id=2, builtin=True, run=run_tight_sbe, states=TIGHT_STATES,
     series=TIGHT_SERIES + ("var_yaw",),
     summary="the same 8-state particle filter weighted by the single-beam altimeter",
-    cost_ns=30.1, color="tab:blue", linestyle="-.", bound=("sbe", "full")))
+    cost_ns=30.1, cost_units=tight_particle_steps, color="tab:blue", linestyle="-.", bound=("sbe", "full")))
