@@ -7,7 +7,9 @@ blocks from the generator ``filters/rng.py`` gives the loop. Per update k:
 
 1. propagate every particle over the interval (Eq. 1; skipped at k = 0);
 2. weight by the terrain altitude innovations of the beams and the distance
-   innovations (Eq. 20), accumulating log-weights;
+   innovations (Eq. 20), accumulating log-weights; with progressive correction
+   (``filter.tempering_ess``, ``filters/tempering.py``) an update that would leave too few
+   effective particles is applied in stages, each resampled, regularised and weighed again;
 3. record the MMSE estimate and the weighted variances;
 4. if the best particle's mean squared normalised innovation stays above
    ``div_sigma^2`` for ``div_steps`` updates, the filter has diverged: reinitialise the
