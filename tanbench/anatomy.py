@@ -30,20 +30,23 @@ BASELINE = "literal"
 SEPARATOR = "__"
 LEVEL = 0.95
 ANATOMY_COLUMNS = ("cell", "switch", "method", "n", "baseline_mean_m", "switched_mean_m", "diff_mean_m",
-                   "ci_low_m", "ci_high_m", "paired", "baseline_lost", "switched_lost")
+                   "ci_low_m", "ci_high_m", "paired", "baseline_lost", "switched_lost", "runs")
 
 
 def difference_interval(switched: pd.Series, baseline: pd.Series, paired: bool, level: float = LEVEL):
-    """(n, mean difference, low, high): paired t on common runs, or Welch's t on all runs."""
+    """(n, mean difference, low, high): paired t on common runs, or Welch's t on all runs; a run whose value
+    is missing (NaN: a metric undefined for it) is left out, with its pair when paired, and n counts what is left."""
+    switched, baseline = switched.astype(float), baseline.astype(float)
     if paired:
         a, b = switched.align(baseline, join="inner")
         d = (a - b).to_numpy(float)
+        d = d[~np.isnan(d)]
         n = d.size
         if n < 2:
             return n, float(d.mean()) if n else np.nan, np.nan, np.nan
         half = stats.t.ppf(0.5 + level / 2, n - 1) * d.std(ddof=1) / np.sqrt(n)
         return n, float(d.mean()), float(d.mean() - half), float(d.mean() + half)
-    a, b = switched.to_numpy(float), baseline.to_numpy(float)
+    a, b = switched.dropna().to_numpy(float), baseline.dropna().to_numpy(float)
     n = min(a.size, b.size)
     if a.size < 2 or b.size < 2:
         return n, float(a.mean() - b.mean()) if n else np.nan, np.nan, np.nan
@@ -86,7 +89,7 @@ def anatomy_table(runs: pd.DataFrame, sweep, column: str = "final_horizontal_err
             n, diff, lo, hi = difference_interval(s, b, paired)
             rows.append(dict(cell=name, switch=switch, method=method, n=n, baseline_mean_m=float(b.mean()),
                              switched_mean_m=float(s.mean()), diff_mean_m=diff, ci_low_m=lo, ci_high_m=hi,
-                             paired=paired, baseline_lost=lost(rb), switched_lost=lost(rs)))
+                             paired=paired, baseline_lost=lost(rb), switched_lost=lost(rs), runs=min(len(rb), len(rs))))
     return pd.DataFrame(rows, columns=list(ANATOMY_COLUMNS))
 
 
@@ -108,8 +111,9 @@ def anatomy_markdown(table: pd.DataFrame, baseline: str = BASELINE, switch_to: s
                 r = rows[rows["method"] == m].iloc[0]
                 ci = "" if np.isnan(r["ci_low_m"]) else f" [{r['ci_low_m']:+.{digits}f}, {r['ci_high_m']:+.{digits}f}]"
                 lost = "" if r["baseline_lost"] < 0 else f"; {r['baseline_lost']} -> {r['switched_lost']}"
+                left_out = f" ({r['n']} of {r['runs']} runs: the others undefined)" if r["n"] < r["runs"] else ""
                 cells.append(f"{r['baseline_mean_m']:.{digits}f} -> {r['switched_mean_m']:.{digits}f}, "
-                             f"{r['diff_mean_m']:+.{digits}f}{ci}{'' if r['paired'] else ' (unpaired)'}{lost}")
+                             f"{r['diff_mean_m']:+.{digits}f}{ci}{'' if r['paired'] else ' (unpaired)'}{left_out}{lost}")
             out.append(f"| {switch} | " + " | ".join(cells) + " |")
         out.append("")
     return "\n".join(out)

@@ -64,3 +64,22 @@ def test_anatomy_table_rows():
     lo = table[(table["switch"] == "terrain") & (table["method"] == "loose-dvl")].iloc[0]
     assert (lo["baseline_lost"], lo["switched_lost"]) == (4, 2)  # 100 x 4 lost; 60, 70, 100, 105: 2 above 75 m
     assert r["baseline_lost"] == 0 and "; 0 -> 0 |" in md
+
+
+def test_undefined_values_leave_their_pairs_out():
+    """A metric undefined for a run (NaN) drops that run's pair; n and the Markdown say how many were left."""
+    a = pd.Series([5.0, np.nan, 9.0, 12.0])
+    b = pd.Series([4.0, 5.0, 8.0, np.nan])
+    n, d, lo, hi = difference_interval(a, b, paired=True)
+    assert n == 2 and d == pytest.approx(1.0) and lo == pytest.approx(1.0) and hi == pytest.approx(1.0)
+    n, d, _, _ = difference_interval(a, b, paired=False)
+    assert n == 3 and d == pytest.approx(26.0 / 3 - 17.0 / 3)
+    sweep = parse_sweep(SWEEP)
+    vals = {(t, m): [10.0, 20.0, 30.0, 40.0] for t in ("t3__literal", "t3__propagation", "t3__terrain")
+            for m in ("tight-dvl", "loose-dvl")}
+    runs = fake_runs(sweep, vals)
+    runs["ratio"] = np.where(runs["run"] == 1, np.nan, 1.0)
+    table = anatomy_table(runs, sweep, column="ratio")
+    r = table[(table["switch"] == "propagation") & (table["method"] == "tight-dvl")].iloc[0]
+    assert (r["n"], r["runs"]) == (3, 4) and r["diff_mean_m"] == 0.0
+    assert "(3 of 4 runs: the others undefined)" in anatomy_markdown(table)
