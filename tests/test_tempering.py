@@ -66,7 +66,7 @@ def test_navigation_distances_are_refused():
     FilterSpec(tempering_ess=0.5, distance_innovation="none")
 
 
-def _run_tight(monkeypatch, name, filter_settings, particles=300, seed=5):
+def _run_tight(monkeypatch, name, filter_settings, particles=300, seed=5, duration_s=90.0):
     """One short tight run in area A; returns (the method's output, the loop's TightOutputs)."""
     from tanbench.methods import get, method_context
     from tanbench.methods import tight as tight_method
@@ -76,7 +76,7 @@ def _run_tight(monkeypatch, name, filter_settings, particles=300, seed=5):
     made = []
     new = tight_method.new_tight_outputs
     monkeypatch.setattr(tight_method, "new_tight_outputs", lambda k: made.append(new(k)) or made[-1])
-    scenario = short_scenario(duration_s=90.0, particles=particles, filter=filter_settings)
+    scenario = short_scenario(duration_s=duration_s, particles=particles, filter=filter_settings)
     vehicle = simulate_vehicle(scenario, vehicle_seed(11, scenario, 0))
     out = get(name).run(method_context(scenario, name, vehicle, np.random.SeedSequence(seed, spawn_key=(0, 1)),
                                        get(name)))
@@ -112,3 +112,30 @@ def test_the_plan_charges_tempering():
     for name in ("tight-dvl", "tight-sbe", "tight-mbe"):
         assert get(name).estimate_seconds(on) == pytest.approx(TEMPERING_COST * get(name).estimate_seconds(off))
     assert get("pmf-dvl").estimate_seconds(on) == get("pmf-dvl").estimate_seconds(off)
+
+
+@pytest.mark.parametrize("name, settings", [
+    ("tight-dvl", {"tight_regularisation": "shared"}),  # the shared kernel's stages (resample_and_regularise)
+    ("tight-sbe", {"random_numbers": "numpy"}),
+    ("tight-mbe", {}),
+])
+def test_tempering_runs_with_the_other_kernels(monkeypatch, name, settings):
+    out, on = _run_tight(monkeypatch, name, {"tempering_ess": 0.5, **settings})
+    assert on.stages[0] > 1 and on.stages.max() <= 8
+    assert np.all(np.isfinite(out.east)) and np.all(np.isfinite(out.north))
+
+
+def test_a_tempered_diverging_run_is_the_one_pass_run(monkeypatch):
+    """With tempering, the loop that stops at its first search and runs again with it (tight_filter_loop) gives
+    the run a single pass with the search's bundle gives: the stages draw the same numbers in both passes."""
+    from test_global_recovery import _one_pass_with_the_search
+    from tanbench.methods import tight as tight_method
+
+    settings = {"tempering_ess": 0.5, "recovery_profile_updates": 30, "divergence_sigma": 0.5, "divergence_steps": 2}
+    two, two_loop = _run_tight(monkeypatch, "tight-sbe", settings, duration_s=120.0)
+    assert two.reinit[30:].sum() > 0
+    with monkeypatch.context() as m:
+        m.setattr(tight_method, "tight_filter_loop", _one_pass_with_the_search)
+        one, one_loop = _run_tight(m, "tight-sbe", settings, duration_s=120.0)
+    for field in ("est", "var", "ess", "reinit", "stages"):
+        np.testing.assert_array_equal(getattr(two_loop, field), getattr(one_loop, field), err_msg=field)
