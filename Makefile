@@ -6,7 +6,7 @@ TB     := $(BIN)/tanbench
 # the paper report shows the literal profile, its other seafloor and the anatomy when their results exist
 PAPER_REPORT = $(TB) report results/zhou2017 $(if $(wildcard results/zhou2017-literal/sweep.yaml),--literal results/zhou2017-literal) $(if $(wildcard results/zhou2017-literal-seed2/sweep.yaml),--other-seafloor results/zhou2017-literal-seed2) $(if $(wildcard results/zhou2017-anatomy/sweep.yaml),--anatomy results/zhou2017-anatomy) $(if $(wildcard results/seafloors/*/sweep.yaml),--seafloors results/seafloors) $(foreach d,$(wildcard results/zhou2017-literal-family*/sweep.yaml),--family $(dir $(d))) $(if $(wildcard results/zhou2017-fitted/sweep.yaml),--fitted results/zhou2017-fitted)
 
-.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations tempering monterey realism heldout-relief multibeam criterion seafloors literal-family fitted check-numpy scaling compile-stages clean
+.PHONY: run test ci-check bench paper paper-literal anatomy report paper-report baseline predict methods ablations tempering kld monterey realism heldout-relief multibeam criterion seafloors literal-family fitted check-numpy scaling compile-stages clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -148,6 +148,20 @@ tempering: $(VENV)/.installed-run
 	 echo "## Time-averaged horizontal error (reported, not counted)"; echo; \
 	 $(TB) anatomy results/tempering --baseline off --column mean_horizontal_error_m --digits 2) \
 	 > results/tempering/ABLATION.md
+
+## kld: tight-dvl and tight-sbe with a fixed and an adaptive (KLD sampling) particle count (configs/kld.yaml,
+## docs/filters.md section 23) into results/kld (no series); the paired differences in results/kld/ABLATION.md
+kld: $(VENV)/.installed-run
+	rm -rf results/kld
+	$(TB) run configs/kld.yaml --out results/kld --quiet --series none
+	(echo "# KLD sampling against a fixed particle count (docs/filters.md section 23)"; echo; \
+	 echo "## Final horizontal error (the counted statistic)"; echo; \
+	 $(TB) anatomy results/kld --baseline fixed --digits 2; \
+	 echo "## Time-averaged horizontal error (reported, not counted)"; echo; \
+	 $(TB) anatomy results/kld --baseline fixed --column mean_horizontal_error_m --digits 2; \
+	 echo "## Filter wall time, s (reported, not counted)"; echo; \
+	 $(TB) anatomy results/kld --baseline fixed --column filter_wall_s --digits 3) \
+	 > results/kld/ABLATION.md
 
 ## monterey: the methods over the real Monterey Canyon tiles in ../shared/data/monterey (read in place)
 monterey: $(VENV)/.installed-run

@@ -545,6 +545,15 @@ class FilterSpec(_Strict):
     tempering_stages: int = new_option(
         8, ge=2, le=64, description="tight PFs with tempering_ess above 0: most stages per update (the last applies "
                                     "whatever remains)")
+    # an adaptive particle count (docs/model.md 6.1, docs/filters.md section 23; filters/kld.py)
+    kld_epsilon: float | None = new_option(
+        None, gt=0, lt=1, description="tight PFs: KLD sampling: each resampling draws the particles that bound the "
+                                      "histogram's KL divergence by this (delta 0.01), between kld_min_particles and "
+                                      "particles [None: a fixed count]")
+    kld_bin_m: float = new_option(2.0, gt=0, description="KLD sampling: east and north bin size (m)")
+    kld_bin_deg: float = new_option(5.0, gt=0, description="KLD sampling: heading bin size (deg)")
+    kld_min_particles: int = new_option(
+        300, ge=16, description="KLD sampling: fewest particles a resampling draws (at most particles)")
 
     @model_validator(mode="after")
     def _gates_need_heading_offsets(self):
@@ -560,6 +569,9 @@ class FilterSpec(_Strict):
             if value != neutral:
                 raise ValueError(f"filter.{name}: {_yaml_word(value)} needs filter.loose_heading_offsets: true "
                                  f"(set it to {_yaml_word(neutral)} without it)")
+        if self.kld_epsilon is not None and (self.tight_regularisation != "posterior" or self.regularisation == "none"):
+            raise ValueError("filter.kld_epsilon needs filter.tight_regularisation: posterior and a regularisation "
+                             "(the adaptive count is built on the posterior-sized kernel)")
         if self.tempering_ess > 0.0 and self.distance_innovation == "navigation":
             raise ValueError("filter.tempering_ess above 0 needs filter.distance_innovation other than navigation "
                              "(a tempering stage weighs resampled particles, whose propagated distances are gone)")

@@ -31,8 +31,7 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters.estimate import _wrap
-from tanbench.filters.resample import (SYSTEMATIC, _add_scaled, _shift_log_weights, apply_resample,
-                                       resample_indices)
+from tanbench.filters.resample import SYSTEMATIC, _add_scaled, _shift_log_weights, gather_columns, resample_indices
 from tanbench.filters.rng import fill_normals, fill_uniforms
 
 REG_POSTERIOR = 3  # the Resampling bundle's kernel code (after options.REGULARISATION's)
@@ -184,6 +183,17 @@ def resample_posterior(x, w, logw, ess, rng, rs, yaw_row, yaw_ref, spread, uni, 
     _shift_log_weights(logw)
     if ess >= rs.ess_threshold * m:
         return
+    resample_posterior_into(x, w, rng, rs, yaw_row, yaw_ref, spread, uni, idx, scratch, x)
+    logw[:] = 0.0
+
+
+@nb.njit(cache=True)
+def resample_posterior_into(x, w, rng, rs, yaw_row, yaw_ref, spread, uni, idx, scratch, out):
+    """:func:`resample_posterior`'s resampling and jitter, whatever the ESS, into ``out`` (rows, n): n =
+    ``idx.shape[0]`` draws from the M columns of ``x`` under weights ``w`` (n = M, and ``out`` ``x`` itself,
+    but for an adaptive count, ``filters/kld.py``; ``out`` may then share ``x``'s memory: every draw is
+    gathered into ``scratch`` (rows, n) before ``out`` is written). The kernel's width is h_opt for n."""
+    n = idx.shape[0]
     d = rs.cols.shape[0]
     mean = np.empty(d)
     cov = np.empty((d, d))
@@ -193,14 +203,13 @@ def resample_posterior(x, w, logw, ess, rng, rs, yaw_row, yaw_ref, spread, uni, 
     draws = uni[:1] if rs.scheme == SYSTEMATIC else uni
     fill_uniforms(rng, draws)
     resample_indices(rs.scheme, w, uni, idx)
-    apply_resample(x, idx, scratch)
+    gather_columns(x, idx, scratch, out)
     noise = scratch[:d]
     fill_normals(rng, noise)
-    shrink_jitter_full(x, rs.cols, yaw_row, mean, chol, posterior_bandwidth_jit(d, m, rs.size), noise)
-    logw[:] = 0.0
+    shrink_jitter_full(out, rs.cols, yaw_row, mean, chol, posterior_bandwidth_jit(d, n, rs.size), noise)
     if spread < rs.min_spread:
         noise2 = scratch[:2]
         fill_normals(rng, noise2)
         s = rs.min_spread / math.sqrt(2.0)
-        _add_scaled(x[0], s, noise2[0])
-        _add_scaled(x[1], s, noise2[1])
+        _add_scaled(out[0], s, noise2[0])
+        _add_scaled(out[1], s, noise2[1])

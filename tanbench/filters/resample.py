@@ -242,30 +242,33 @@ def sorted_uniforms_numpy(u):
 
 @nb.njit(cache=True)
 def resample_indices(scheme, w, uniforms, idx):
-    """Ancestor indices into ``idx`` (M,) for weights ``w`` using ``uniforms`` (M,) in [0, 1)."""
+    """Ancestor indices into ``idx`` (n,) for weights ``w`` (M,) using ``uniforms`` (n,) in [0, 1):
+    n draws from M particles (n = M but for an adaptive count, ``filters/kld.py``)."""
     m = w.shape[0]
-    points = np.empty(m)
+    n = idx.shape[0]
+    points = np.empty(n)
     if scheme == SYSTEMATIC:
-        for k in range(m):
-            points[k] = (uniforms[0] + k) / m
+        for k in range(n):
+            points[k] = (uniforms[0] + k) / n
         _sweep(w, points, idx)
     elif scheme == STRATIFIED:
-        for k in range(m):
-            points[k] = (uniforms[k] + k) / m
+        for k in range(n):
+            points[k] = (uniforms[k] + k) / n
         _sweep(w, points, idx)
     elif scheme == MULTINOMIAL:
-        sorted_uniforms(uniforms, points)
+        sorted_uniforms(uniforms[:n], points)
         _sweep(w, points, idx)
     else:  # residual
         k = 0
         resid = np.empty(m)
         for i in range(m):
-            copies = int(math.floor(m * w[i]))
+            copies = int(math.floor(n * w[i]))
             for _ in range(copies):
-                idx[k] = i
-                k += 1
-            resid[i] = m * w[i] - copies
-        rest = m - k
+                if k < n:
+                    idx[k] = i
+                    k += 1
+            resid[i] = n * w[i] - copies
+        rest = n - k
         if rest > 0:
             cdf = np.cumsum(resid)
             total = cdf[m - 1]
@@ -273,19 +276,20 @@ def resample_indices(scheme, w, uniforms, idx):
                 idx[k + r] = min(np.searchsorted(cdf, uniforms[r] * total, side="right"), m - 1)
 
 
-def resample_indices_numpy(scheme, w, uniforms):
-    """Plain-numpy reference of :func:`resample_indices`."""
+def resample_indices_numpy(scheme, w, uniforms, n=None):
+    """Plain-numpy reference of :func:`resample_indices` (``n`` draws, M = len(w) by default)."""
     m = w.size
+    n = m if n is None else n
     cdf = np.cumsum(w)
     if scheme in (SYSTEMATIC, STRATIFIED):
-        points = (uniforms[0] + np.arange(m)) / m if scheme == SYSTEMATIC else (uniforms + np.arange(m)) / m
+        points = (uniforms[0] + np.arange(n)) / n if scheme == SYSTEMATIC else (uniforms[:n] + np.arange(n)) / n
         return np.minimum(np.searchsorted(cdf, points, side="left"), m - 1)
     if scheme == MULTINOMIAL:
-        return np.minimum(np.searchsorted(cdf, sorted_uniforms_numpy(uniforms), side="left"), m - 1)
-    copies = np.floor(m * w).astype(np.int64)
-    idx = np.repeat(np.arange(m), copies)
-    rest = m - idx.size
-    resid = m * w - copies
+        return np.minimum(np.searchsorted(cdf, sorted_uniforms_numpy(uniforms[:n]), side="left"), m - 1)
+    copies = np.floor(n * w).astype(np.int64)
+    idx = np.repeat(np.arange(m), copies)[:n]
+    rest = n - idx.size
+    resid = n * w - copies
     rcdf = np.cumsum(resid)
     extra = np.minimum(np.searchsorted(rcdf, uniforms[:rest] * rcdf[-1], side="right"), m - 1)
     return np.concatenate([idx, extra])
@@ -301,6 +305,22 @@ def apply_resample(x, idx, scratch):
             out[k] = row[idx[k]]
         for k in range(idx.shape[0]):
             row[k] = out[k]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def gather_columns(x, idx, scratch, out):
+    """``out`` (nrows, n) = ``x[:, idx]`` through ``scratch`` (nrows, n): every column is gathered before ``out``
+    is written, so ``out`` may be ``x`` itself or share its memory (the adaptive count's new cloud)."""
+    for c in range(x.shape[0]):
+        row = x[c]
+        tmp = scratch[c]
+        for k in range(idx.shape[0]):
+            tmp[k] = row[idx[k]]
+    for c in range(out.shape[0]):
+        row = out[c]
+        tmp = scratch[c]
+        for k in range(idx.shape[0]):
+            row[k] = tmp[k]
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")

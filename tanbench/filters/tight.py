@@ -49,12 +49,13 @@ from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, likelihood_of, loglik_tight_pass,
                                         new_likelihood_work, work_block)
 from tanbench.filters.bias_walk import tight_bias_walk_std, walk_biases
-from tanbench.filters.posterior import REG_POSTERIOR, resample_posterior
+from tanbench.filters.kld import KLD_Z, bin_table, kld_count, kld_of, occupied_bins
+from tanbench.filters.posterior import REG_POSTERIOR, resample_posterior, resample_posterior_into
 from tanbench.filters.propagate import DIST_NAVIGATION, propagate_tight, propagate_tight_euler
 from tanbench.filters.recovery import recovery_square
 from tanbench.filters.relocalise import relocalise_around, relocaliser
-from tanbench.filters.resample import (Resampling, _add_scaled, add_log_weights, max_log_weight, normalise_with_ess,
-                                      resample_and_regularise, resampling_of)
+from tanbench.filters.resample import (Resampling, _add_scaled, _shift_log_weights, add_log_weights, max_log_weight,
+                                      normalise_with_ess, resample_and_regularise, resampling_of)
 from tanbench.filters.rng import fill_normals, rng_state, set_rng_state
 from tanbench.filters.tempering import tempering_fraction, tempering_of
 from tanbench.filters.state import BX, BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
@@ -101,10 +102,11 @@ Guard = namedtuple("Guard", "spread_limit healthy_std bounds")
 # everything the loop is set with (``temper``: progressive correction, filters/tempering.py), and the
 # navigation solution at the K updates: the (K-1, 12) increments, yaw, pitch, roll and up (K,) and the
 # (K-1, 4) Euler-step inputs
-TightSettings = namedtuple("TightSettings", "model rs div prior readings lik guard temper")
+TightSettings = namedtuple("TightSettings", "model rs div prior readings lik guard temper kld")
 TightTrack = namedtuple("TightTrack", "inc yaw pitch roll up euler_in")
-# what the loop fills: est/var (K, 8), cov_en, ess, reinit, healthy and the update's tempering stages (K,)
-TightOutputs = namedtuple("TightOutputs", "est var cov_en ess reinit healthy stages")
+# what the loop fills: est/var (K, 8), cov_en, ess, reinit, healthy, the update's tempering stages and its
+# particles (K,)
+TightOutputs = namedtuple("TightOutputs", "est var cov_en ess reinit healthy stages particles")
 
 
 def divergence_of(f) -> Divergence:
@@ -176,12 +178,13 @@ def tight_settings(scenario, nmap, beams: int = 4) -> TightSettings:
     rs = tight_resampling_of(f, beams)
     return TightSettings(tight_model_of(scenario), rs, divergence_of(f), tight_prior_of(f),
                          readings_of(f, scenario.sampling_time_s), likelihood_of(f), guard_of(f, nmap),
-                         tempering_of(f, rs))
+                         tempering_of(f, rs), kld_of(f, scenario.particles))
 
 
 def new_tight_outputs(k: int) -> TightOutputs:
     return TightOutputs(np.empty((k, N_TIGHT)), np.empty((k, N_TIGHT)), np.empty(k), np.empty(k),
-                        np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), np.ones(k, dtype=np.int64))
+                        np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), np.ones(k, dtype=np.int64),
+                        np.zeros(k, dtype=np.int64))
 
 
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -275,25 +278,35 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out, search=
 
 
 @nb.njit(cache=True)
-def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs, stop_to_search):
+def _tight_loop(cloud, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs, stop_to_search):
     """:func:`tight_filter_loop`, with ``reloc`` the global search's ``Relocalise`` bundle
     (``filter.recovery: global``) or None, ``euler_in`` the Euler-step inputs (``track.euler_in``) if
     ``readings.propagation`` asks for the Euler step, else None (the exact increments), and
     ``shared_rs`` the Resampling bundle if the shared kernel regularises
     (``resample.resample_and_regularise``), else None (the posterior-sized kernel). With
     ``stop_to_search`` (and ``reloc`` None) it returns at the first update where a diverged cloud would be
-    searched for, before drawing anything there; returns that update, or -1 after the last one."""
+    searched for, before drawing anything there; returns that update, or -1 after the last one.
+
+    The loop works on a copy of ``cloud`` (8, M): with an adaptive count (``settings.kld``, filters/kld.py) the
+    cloud is the first ``mc`` particles, each array a contiguous view of the first ``mc`` entries of a buffer for M,
+    and a resampling may draw another count; with the fixed count (the default) ``mc`` is M throughout."""
     inc, nav_yaw, nav_pitch, nav_roll, nav_up, _ = track
-    model, rs, div, prior, readings, lik, guard, temper = settings
-    est, var, cov_en_out, ess_out, reinit_out, healthy_out, stages_out = out
-    m = x.shape[1]
+    model, rs, div, prior, readings, lik, guard, temper, kld = settings
+    est, var, cov_en_out, ess_out, reinit_out, healthy_out, stages_out, particles_out = out
+    m = cloud.shape[1]  # the most particles
+    mc = m  # the cloud's particles now
     steps = ranges.shape[0]
-    logw = np.zeros(m)
-    ll = np.empty(m)
-    w = np.empty(m)
-    uni = np.empty(m)
-    idx = np.empty(m, dtype=np.int64)
-    scratch = np.empty_like(x)
+    xbuf = np.empty(N_TIGHT * m)
+    for c in range(N_TIGHT):
+        for j in range(m):
+            xbuf[c * m + j] = cloud[c, j]
+    sbuf = np.empty(N_TIGHT * m)
+    logw_buf = np.zeros(m)
+    ll_buf = np.empty(m)
+    w_buf = np.empty(m)
+    uni_buf = np.empty(m)
+    idx_buf = np.empty(m, dtype=np.int64)
+    bin_keys, bin_weights = bin_table(m if kld.epsilon > 0.0 else 1)
     block = min(BLOCK, m)
     walk = model.sig_bias > 0.0  # gyro biases random-walk: two more noise rows per particle
     noise_rows = 8 if walk else 6
@@ -314,14 +327,22 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
     dr_e = 0.0
     dr_n = 0.0
     for k in range(steps):
+        x = xbuf[:N_TIGHT * mc].reshape((N_TIGHT, mc))
+        scratch = sbuf[:N_TIGHT * mc].reshape((N_TIGHT, mc))
+        logw = logw_buf[:mc]
+        ll = ll_buf[:mc]
+        w = w_buf[:mc]
+        uni = uni_buf[:mc]
+        idx = idx_buf[:mc]
+        particles_out[k] = mc
         if k > 0:
             dr_e += inc[k - 1, D0E]
             dr_n += inc[k - 1, D0N]
         vec = beam_vectors(beams, ranges[k])
         att = attitude_reference(nav_pitch[k], nav_roll[k], nav_yaw[k] + yaw_off)
         best = np.inf
-        for lo in range(0, m, block):  # the particle passes, block by block
-            n = min(block, m - lo)
+        for lo in range(0, mc, block):  # the particle passes, block by block
+            n = min(block, mc - lo)
             dist = dist_buf[:2 * n].reshape((2, n))
             if k > 0:
                 noise_all = noise_buf[:noise_rows * n].reshape((noise_rows, n))
@@ -345,7 +366,7 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
         remaining = 1.0
         stages_out[k] = 1
         while stages_out[k] < temper.stages:
-            lam = tempering_fraction(logw, ll, remaining, temper.ess_fraction * m, w)
+            lam = tempering_fraction(logw, ll, remaining, temper.ess_fraction * mc, w)
             if lam >= remaining:
                 break
             if lam > 0.0:
@@ -358,8 +379,8 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
             else:
                 resample_and_regularise(x, w, logw, ess, rng, temper.rs, N_TIGHT, spread, uni, idx, scratch)
             remaining -= lam
-            for lo in range(0, m, block):  # with_dist is False here: FilterSpec refuses tempering with the
-                n = min(block, m - lo)  # navigation's distances (and a literal False would compile the pass again)
+            for lo in range(0, mc, block):  # with_dist is False here: FilterSpec refuses tempering with the
+                n = min(block, mc - lo)  # navigation's distances (and a literal False would compile the pass again)
                 loglik_tight_pass(x, lo, vec, grid, lik, consts, att, dist_buf[:2 * n].reshape((2, n)), with_dist,
                                   work_block(work, n), ll[lo:lo + n])
             stages_out[k] += 1
@@ -390,7 +411,7 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
         if best < np.inf:  # an update without any bottom lock says nothing about divergence
             bad = bad + 1 if (best > div.sigma * div.sigma or (locked and spread > guard.spread_limit)) else 0
         diverged = readings.div_reinit and bad >= div.steps
-        collapsed = ess < rs.ess_threshold * m and spread < readings.collapse_spread
+        collapsed = ess < rs.ess_threshold * mc and spread < readings.collapse_spread
         if diverged or collapsed or off_map:
             centre_e, centre_n, half = mean[E], mean[N], prior.reinit_half_side
             turn = 0.0  # the re-drawn headings' centre, from the navigation heading
@@ -404,20 +425,33 @@ def _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_
                     found, match_e, match_n, match_turn = relocalise_around(inc, nav_up, k, mean[E], mean[N], reloc)
                     if found:
                         centre_e, centre_n, half, turn = match_e, match_n, prior.reinit_half_side, match_turn
+            if mc != m:  # a re-drawn cloud is wide: the most particles again
+                mc = m
+                x = xbuf.reshape((N_TIGHT, m))
             draw_tight(x, rng, centre_e, centre_n, nav_up[k], nav_pitch[k], nav_roll[k], nav_yaw[k] + turn, prior,
                        half)
             if readings.cloud_std > 0.0:
                 gaussian_horizontal(x, rng, centre_e, centre_n, readings.cloud_std)
-            logw[:] = 0.0
+            logw_buf[:mc] = 0.0
             bad = 0
             locked = False
             yaw_off = turn  # the new cloud is drawn about the navigation heading (turned by a global match)
             reinit_out[k] = 1
             continue
-        if shared_rs is None:
-            resample_posterior(x, w, logw, ess, rng, rs, YAW, mean[YAW], spread, uni, idx, scratch)
-        else:
+        if shared_rs is not None:
             resample_and_regularise(x, w, logw, ess, rng, shared_rs, N_TIGHT, spread, uni, idx, scratch)
+        elif kld.epsilon == 0.0:
+            resample_posterior(x, w, logw, ess, rng, rs, YAW, mean[YAW], spread, uni, idx, scratch)
+        else:  # KLD sampling (filters/kld.py): a resampling draws the count the cloud's occupied bins ask for
+            _shift_log_weights(logw)
+            if ess < rs.ess_threshold * mc:
+                bins = occupied_bins(x, w, kld.bin_m, kld.bin_rad, 1.0 / m, bin_keys, bin_weights)
+                drawn = kld_count(bins, kld.epsilon, KLD_Z, kld.min_particles, m)
+                resample_posterior_into(x, w, rng, rs, YAW, mean[YAW], spread, uni_buf[:drawn], idx_buf[:drawn],
+                                        sbuf[:N_TIGHT * drawn].reshape((N_TIGHT, drawn)),
+                                        xbuf[:N_TIGHT * drawn].reshape((N_TIGHT, drawn)))
+                mc = drawn
+                logw_buf[:mc] = 0.0
     return -1
 
 
