@@ -137,31 +137,30 @@ ablations: $(VENV)/.installed-run
 	rm -rf results/zhou2017-ablations
 	$(TB) run configs/zhou2017-ablations.yaml --out results/zhou2017-ablations --quiet --series none
 
-## tempering: the tight PFs with and without progressive correction (configs/tempering.yaml, docs/filters.md
-## section 22) into results/tempering (no series); the paired differences in results/tempering/ABLATION.md
-tempering: $(VENV)/.installed-run
-	rm -rf results/tempering
-	$(TB) run configs/tempering.yaml --out results/tempering --quiet --series none
-	(echo "# Progressive correction against none (docs/filters.md section 22)"; echo; \
+# an ablation sweep whose tables are <cell>__<switch>: configs/$(1).yaml into results/$(1) afresh (no series), then
+# its paired differences against the <cell>__$(2) tables (tanbench anatomy) in results/$(1)/ABLATION.md, titled $(3)
+define ablation
+	rm -rf results/$(1)
+	$(TB) run configs/$(1).yaml --out results/$(1) --quiet --series none
+	(echo "# $(3)"; echo; \
 	 echo "## Final horizontal error (the counted statistic)"; echo; \
-	 $(TB) anatomy results/tempering --baseline off --digits 2; \
+	 $(TB) anatomy results/$(1) --baseline $(2) --digits 2; \
 	 echo "## Time-averaged horizontal error (reported, not counted)"; echo; \
-	 $(TB) anatomy results/tempering --baseline off --column mean_horizontal_error_m --digits 2) \
-	 > results/tempering/ABLATION.md
+	 $(TB) anatomy results/$(1) --baseline $(2) --column mean_horizontal_error_m --digits 2; \
+	 echo "## Filter wall time, s (reported, not counted)"; echo; \
+	 $(TB) anatomy results/$(1) --baseline $(2) --column filter_wall_s --digits 3) \
+	 > results/$(1)/ABLATION.md
+endef
+
+## tempering: tight-dvl and tight-sbe with and without progressive correction (configs/tempering.yaml,
+## docs/filters.md section 22) into results/tempering (no series); the paired differences in results/tempering/ABLATION.md
+tempering: $(VENV)/.installed-run
+	$(call ablation,tempering,off,Progressive correction against none (docs/filters.md section 22))
 
 ## kld: tight-dvl and tight-sbe with a fixed and an adaptive (KLD sampling) particle count (configs/kld.yaml,
 ## docs/filters.md section 23) into results/kld (no series); the paired differences in results/kld/ABLATION.md
 kld: $(VENV)/.installed-run
-	rm -rf results/kld
-	$(TB) run configs/kld.yaml --out results/kld --quiet --series none
-	(echo "# KLD sampling against a fixed particle count (docs/filters.md section 23)"; echo; \
-	 echo "## Final horizontal error (the counted statistic)"; echo; \
-	 $(TB) anatomy results/kld --baseline fixed --digits 2; \
-	 echo "## Time-averaged horizontal error (reported, not counted)"; echo; \
-	 $(TB) anatomy results/kld --baseline fixed --column mean_horizontal_error_m --digits 2; \
-	 echo "## Filter wall time, s (reported, not counted)"; echo; \
-	 $(TB) anatomy results/kld --baseline fixed --column filter_wall_s --digits 3) \
-	 > results/kld/ABLATION.md
+	$(call ablation,kld,fixed,KLD sampling against a fixed particle count (docs/filters.md section 23))
 
 ## monterey: the methods over the real Monterey Canyon tiles in ../shared/data/monterey (read in place)
 monterey: $(VENV)/.installed-run

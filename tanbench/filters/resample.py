@@ -295,16 +295,10 @@ def resample_indices_numpy(scheme, w, uniforms, n=None):
     return np.concatenate([idx, extra])
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True)
 def apply_resample(x, idx, scratch):
     """Replace the columns of ``x`` (nrows, M) by ``x[:, idx]`` (``scratch`` is a same-shaped buffer)."""
-    for c in range(x.shape[0]):
-        row = x[c]
-        out = scratch[c]
-        for k in range(idx.shape[0]):
-            out[k] = row[idx[k]]
-        for k in range(idx.shape[0]):
-            row[k] = out[k]
+    gather_columns(x, idx, scratch, x)
 
 
 @nb.njit(cache=True, error_model="numpy")
