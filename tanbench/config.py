@@ -572,6 +572,10 @@ class FilterSpec(_Strict):
         if self.kld_epsilon is not None and (self.tight_regularisation != "posterior" or self.regularisation == "none"):
             raise ValueError("filter.kld_epsilon needs filter.tight_regularisation: posterior and a regularisation "
                              "(the adaptive count is built on the posterior-sized kernel)")
+        if self.kld_epsilon is not None and self.tempering_ess > 0.0:
+            raise ValueError("filter.kld_epsilon with filter.tempering_ess above 0: the tempering stages resample at "
+                             "the cloud's count and keep its ESS up, so the count would hardly ever change (set one "
+                             "of them)")
         if self.tempering_ess > 0.0 and self.distance_innovation == "navigation":
             raise ValueError("filter.tempering_ess above 0 needs filter.distance_innovation other than navigation "
                              "(a tempering stage weighs resampled particles, whose propagated distances are gone)")

@@ -116,3 +116,28 @@ def test_the_loop_adapts_its_count(monkeypatch, name, late):
     assert on.particles[0] == 2000 and on.particles.min() >= 200 and on.particles.max() <= 2000
     assert on.particles[-20:].mean() < late and on.particles[-1] < 2000
     assert np.all(np.isfinite(out.east)) and np.all(np.isfinite(out.north))
+
+
+def test_the_bins_spread_over_the_table():
+    """A wide cloud's bins start their searches at nearly as many slots as there are bins (a hash of the packed
+    key's low bits alone gave 3 slots for about 2900 bins, and one chain of millions of probes)."""
+    from tanbench.filters.kld import home_slot
+
+    x, _ = _cloud(3000, 100.0)
+    keys, _ = bin_table(3000)
+    size = keys.shape[0]
+    bins = {(int(np.floor(x[0, j] / 2.0)), int(np.floor(x[1, j] / 2.0)), int(np.floor(x[5, j] / math.radians(5.0))))
+            for j in range(3000)}
+    slots = {home_slot(ie + 600000, jn + 600000, iy + 600000, size) for ie, jn, iy in bins}
+    assert len(bins) > 2500 and len(slots) > 0.6 * len(bins)
+
+
+def test_kld_count_for_a_tiny_epsilon_is_the_most():
+    assert kld_count(50, 1e-300, KLD_Z, 300, 3000) == 3000 == kld_count_numpy(50, 1e-300, KLD_Z, 300, 3000)
+
+
+def test_kld_with_tempering_is_refused():
+    from tanbench.config import FilterSpec
+
+    with pytest.raises(ValueError, match="kld_epsilon with filter.tempering_ess"):
+        FilterSpec(kld_epsilon=0.05, tempering_ess=0.5)

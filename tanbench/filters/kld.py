@@ -30,7 +30,9 @@ import numpy as np
 KLD_Z = 2.3263478740408408  # the standard normal's 0.99 quantile: delta = 0.01
 EMPTY = np.iinfo(np.int64).min  # the table's free slot
 _SPAN = 1 << 19  # bin indices are packed as 20-bit fields (2^19 bins either way of the first particle's corner)
-_MIX = -7046029254386353131  # 0x9E3779B97F4A7C15 as an int64: Fibonacci hashing of a key into the table
+# a bin's home slot: its three indices times large odd numbers, XOR-ed (each product below 2^47, so no int64
+# overflow; a product's low bits alone, as a wrapping multiply of the packed key gives them, hold only the heading)
+_HASH = (73856093, 19349663, 83492791)
 
 # the loop's adaptive count: ``epsilon`` 0 = a fixed count (the neutral value); bins of ``bin_m`` metres
 # and ``bin_rad`` radians; at least ``min_particles``
@@ -56,11 +58,18 @@ def bin_table(particles):
 
 
 @nb.njit(cache=True)
-def _bin_key(x, j, e0, n0, y0, bin_m, bin_rad):
+def home_slot(ie, jn, iy, size):
+    """The table slot (``size`` a power of two) where the search for bin (``ie``, ``jn``, ``iy``) starts."""
+    return ((ie * _HASH[0]) ^ (jn * _HASH[1]) ^ (iy * _HASH[2])) & (size - 1)
+
+
+@nb.njit(cache=True)
+def _bin_key(x, j, e0, n0, y0, bin_m, bin_rad, size):
+    """Particle ``j``'s bin: (its packed key, its home slot)."""
     ie = min(max(int(math.floor((x[0, j] - e0) / bin_m)), 1 - _SPAN), _SPAN - 1) + _SPAN
     jn = min(max(int(math.floor((x[1, j] - n0) / bin_m)), 1 - _SPAN), _SPAN - 1) + _SPAN
     iy = min(max(int(math.floor((x[5, j] - y0) / bin_rad)), 1 - _SPAN), _SPAN - 1) + _SPAN
-    return (ie << 40) | (jn << 20) | iy
+    return (ie << 40) | (jn << 20) | iy, home_slot(ie, jn, iy, size)
 
 
 @nb.njit(cache=True)
@@ -77,8 +86,7 @@ def occupied_bins(x, w, bin_m, bin_rad, min_weight, keys, weights):
     y0 = math.floor(x[5, 0] / bin_rad) * bin_rad
     count = 0
     for j in range(x.shape[1]):
-        key = _bin_key(x, j, e0, n0, y0, bin_m, bin_rad)
-        slot = (key * _MIX) & (size - 1)
+        key, slot = _bin_key(x, j, e0, n0, y0, bin_m, bin_rad, size)
         while keys[slot] != EMPTY and keys[slot] != key:
             slot = (slot + 1) & (size - 1)
         new = keys[slot] == EMPTY
@@ -107,7 +115,7 @@ def kld_count(k, epsilon, z, low, high):
     if k < 2:
         return low
     a = 2.0 / (9.0 * (k - 1))
-    n = (k - 1) / (2.0 * epsilon) * (1.0 - a + math.sqrt(a) * z) ** 3
+    n = min((k - 1) / (2.0 * epsilon) * (1.0 - a + math.sqrt(a) * z) ** 3, float(high))  # clamped before rounding
     return int(min(max(math.ceil(n), low), high))
 
 
