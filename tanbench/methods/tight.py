@@ -32,7 +32,7 @@ EULER_WINDOW_S = {"euler-last-second": 1.0, "euler-last-sample": 0.0, "euler-int
 
 
 # the tight loop's cost with progressive correction (filter.tempering_ess above 0) over its cost without: the median
-# filter wall time of each cell of results/tempering over its untempered twin was 1.44-1.73 (docs/filters.md 22.1)
+# filter wall time of each cell of results/tempering over its untempered twin was 1.45-1.76 (docs/filters.md 22.1)
 TEMPERING_COST = 1.6
 
 
