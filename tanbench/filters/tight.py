@@ -268,10 +268,9 @@ def tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out, search=
     if search is None:
         _tight_loop(x, rng, track, ranges, beams, grid, settings, out, None, euler_in, shared_rs, False)
         return
-    start, state = x.copy(), rng_state(rng)
+    state = rng_state(rng)  # the loop works on a copy of x, so only the random numbers need putting back
     if _tight_loop(x, rng, track, ranges, beams, grid, settings, out, None, euler_in, shared_rs, True) < 0:
         return
-    x[...] = start
     set_rng_state(rng, state)
     reloc = relocaliser(search, track, beams, ranges, grid, settings.model.sig_u)
     _tight_loop(x, rng, track, ranges, beams, grid, settings, out, reloc, euler_in, shared_rs, False)
