@@ -71,14 +71,25 @@ def _best(fn, n):
 MULTIBEAM_BENCH = {"multibeam_beams": 64, "multibeam_swath_deg": 120.0}
 
 
-def bench_scenario(particles: int, random_numbers: str | None = None, multibeam: bool = False):
-    return Scenario(particles=particles, filter={} if random_numbers is None else {"random_numbers": random_numbers},
-                    sensors=MULTIBEAM_BENCH if multibeam else {})
+# the tight PF's measured options, benched beside its defaults (docs/filters.md sections 22 and 23)
+OPTION_RUNS = ({"tempering_ess": 0.5}, {"kld_epsilon": 0.05})
 
 
-def run_figures(method: str, particles: int, repeats: int, random_numbers: str | None = None) -> dict:
-    """Whole-run figures of ``method``: ns per cost unit (CPU and wall), run wall, calibrated cost."""
-    scenario = bench_scenario(particles, random_numbers, multibeam=method.endswith("-mbe"))
+def bench_scenario(particles: int, random_numbers: str | None = None, multibeam: bool = False,
+                   options: dict | None = None):
+    settings = dict(options or {})
+    if random_numbers is not None:
+        settings["random_numbers"] = random_numbers
+    return Scenario(particles=particles, filter=settings, sensors=MULTIBEAM_BENCH if multibeam else {})
+
+
+def run_figures(method: str, particles: int, repeats: int, random_numbers: str | None = None,
+                options: dict | None = None) -> dict:
+    """Whole-run figures of ``method``: ns per cost unit (CPU and wall), run wall, calibrated cost; ``options``
+    are ``filter`` settings. A cost unit is the plan's: with tempering, ``TEMPERING_COST`` particle-steps (so a
+    figure near the defaults' says the plan's factor holds), with an adaptive count, a particle-step of the most
+    particles (so the figure falls with the count)."""
+    scenario = bench_scenario(particles, random_numbers, multibeam=method.endswith("-mbe"), options=options)
     vehicle = simulate_vehicle(scenario, np.random.SeedSequence(BENCH_SEED))
     units = float(get(method).cost_units(scenario))
     run_method(scenario, method, vehicle, np.random.SeedSequence(1))  # compile / load the cache
@@ -93,11 +104,14 @@ def run_figures(method: str, particles: int, repeats: int, random_numbers: str |
             ess = np.asarray(result.series["ess"], dtype=float)
     return {
         "method": method, "random_numbers": scenario.filter.random_numbers, "stream": method in PARTICLE_FILTERS,
+        "options": " ".join(f"{k}={v}" for k, v in (options or {}).items()),
         "cost_units": units,
         "ns_per_unit_cpu": round(min(cpu) / units * 1e9, 1),
         "ns_per_unit_wall": round(min(filt) / units * 1e9, 1),
         "run_wall_s": round(min(wall), 3),
-        "resampled_fraction": None if ess is None else round(float(np.mean(ess < 0.5 * particles)), 3),
+        # (not for an option run: the ESS is read against the most particles, which neither the tempered ESS nor an
+        # adaptive count's is)
+        "resampled_fraction": None if ess is None or options else round(float(np.mean(ess < 0.5 * particles)), 3),
     }
 
 
@@ -528,6 +542,8 @@ def run_bench(particles: int = 3000, repeats: int = 3, methods=None, yardstick=N
         runs.append(run_figures(method, particles, repeats))
         if method in PARTICLE_FILTERS:
             runs.append(run_figures(method, particles, repeats, "numpy"))
+        if method == "tight-dvl":
+            runs += [run_figures(method, particles, repeats, options=options) for options in OPTION_RUNS]
     rounds = []
     if yardstick is not None and yardstick_ns(yardstick, particles) is not None:  # the first call compiles
         for _ in range(repeats):

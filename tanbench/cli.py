@@ -803,8 +803,9 @@ def bench(as_json: bool = typer.Option(False, "--json", help="Print one JSON obj
     for r in figures["runs"]:
         frac = "" if r["resampled_fraction"] is None else f"  resampled {100 * r['resampled_fraction']:.0f} %"
         vs = (f"   numpy stream / this = {numpy_cpu[r['method']] / r['ns_per_unit_cpu']:4.2f}"
-              if r["random_numbers"] != "numpy" and r["method"] in numpy_cpu else "")
-        stream = f"random_numbers={r['random_numbers']:<5}" if r["stream"] else " " * 20
+              if r["random_numbers"] != "numpy" and r["method"] in numpy_cpu and not r["options"] else "")
+        stream = (f"{r['options']:<20}" if r["options"] else
+                  f"random_numbers={r['random_numbers']:<5}" if r["stream"] else " " * 20)
         typer.echo(f"  {r['method']:<12} {stream} {r['ns_per_unit_cpu']:7.1f} / "
                    f"{r['ns_per_unit_wall']:7.1f} ns   run {r['run_wall_s']:6.2f} s "
                    f"({1e6 * r['run_wall_s'] / figures['updates']:7.1f} us per update){frac}{vs}")
