@@ -439,18 +439,20 @@ def _tight_loop(cloud, rng, track, ranges, beams, grid, settings, out, reloc, eu
             continue
         if shared_rs is not None:
             resample_and_regularise(x, w, logw, ess, rng, shared_rs, N_TIGHT, spread, uni, idx, scratch)
-        elif kld.epsilon == 0.0:
-            resample_posterior(x, w, logw, ess, rng, rs, YAW, mean[YAW], spread, uni, idx, scratch)
-        else:  # KLD sampling (filters/kld.py): a resampling draws the count the cloud's occupied bins ask for
-            _shift_log_weights(logw)
-            if ess < rs.ess_threshold * mc:
+            continue
+        # posterior.resample_posterior, drawing the cloud's own count, or with KLD sampling (filters/kld.py) the
+        # count its occupied bins ask for
+        _shift_log_weights(logw)
+        if ess < rs.ess_threshold * mc:
+            drawn = mc
+            if kld.epsilon > 0.0:
                 bins = occupied_bins(x, w, kld.bin_m, kld.bin_rad, 1.0 / m, bin_keys, bin_weights)
                 drawn = kld_count(bins, kld.epsilon, KLD_Z, kld.min_particles, m)
-                resample_posterior_into(x, w, rng, rs, YAW, mean[YAW], spread, uni_buf[:drawn], idx_buf[:drawn],
-                                        sbuf[:N_TIGHT * drawn].reshape((N_TIGHT, drawn)),
-                                        xbuf[:N_TIGHT * drawn].reshape((N_TIGHT, drawn)))
-                mc = drawn
-                logw_buf[:mc] = 0.0
+            resample_posterior_into(x, w, rng, rs, YAW, mean[YAW], spread, uni_buf[:drawn], idx_buf[:drawn],
+                                    sbuf[:N_TIGHT * drawn].reshape((N_TIGHT, drawn)),
+                                    xbuf[:N_TIGHT * drawn].reshape((N_TIGHT, drawn)))
+            mc = drawn
+            logw_buf[:mc] = 0.0
     return -1
 
 
