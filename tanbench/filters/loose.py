@@ -246,6 +246,24 @@ def record_kalman_update(out, k, nav, p_kf, ess, healthy):
     healthy_out[k] = 1 if healthy else 0
     reinit_out[k] = 0
 
+@nb.njit(cache=True, inline="always")
+def navigation_step(nav, inc_row, yaw_nav, up_nav):
+    """The corrected navigation ``nav`` (8, 1) dead-reckoned over one increments row ``inc_row`` from
+    the navigation solution's heading ``yaw_nav`` and up ``up_nav`` at the interval's start
+    (:func:`~tanbench.filters.propagate.dead_reckon`); returns its east and north displacement and the
+    z-gyro bias's lever on them in the navigation frame (``b_e``, ``b_n``), which the error-state KF's
+    prediction (:func:`~tanbench.navigation.eskf.eskf_predict`) takes: (d_e, d_n, b_e, b_n). The loose
+    loops' one step of the navigation system."""
+    e_before = nav[E, 0]
+    n_before = nav[N, 0]
+    s, c = math.sin(nav[YAW, 0] - yaw_nav), math.cos(nav[YAW, 0] - yaw_nav)
+    b_e = -(c * inc_row[JAZE] - s * inc_row[JAZN])
+    b_n = -(s * inc_row[JAZE] + c * inc_row[JAZN])
+    nav[U, 0] = up_nav
+    dead_reckon(nav, inc_row, yaw_nav)
+    return nav[E, 0] - e_before, nav[N, 0] - n_before, b_e, b_n
+
+
 @nb.njit(cache=True)
 def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
     """Position PF -> fixes -> error-state KF of the navigation system -> corrected navigation,
@@ -311,15 +329,7 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
     sig_heading = 0.0
     for k in range(steps):
         if k > 0:
-            e_before = nav[E, 0]
-            n_before = nav[N, 0]
-            s, c = math.sin(nav[YAW, 0] - nav_yaw[k - 1]), math.cos(nav[YAW, 0] - nav_yaw[k - 1])
-            b_e = -(c * inc[k - 1, JAZE] - s * inc[k - 1, JAZN])
-            b_n = -(s * inc[k - 1, JAZE] + c * inc[k - 1, JAZN])
-            nav[U, 0] = nav_up[k - 1]
-            dead_reckon(nav, inc[k - 1], nav_yaw[k - 1])
-            d_e = nav[E, 0] - e_before
-            d_n = nav[N, 0] - n_before
+            d_e, d_n, b_e, b_n = navigation_step(nav, inc[k - 1], nav_yaw[k - 1], nav_up[k - 1])
             sig_heading = math.sqrt(p_kf[EPSI, EPSI])
             eskf_predict(p_kf, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
             # the window's prior: the same motion and process noise as the particles

@@ -64,8 +64,7 @@ from tanbench.filters.cloud import uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
                                         work_block)
-from tanbench.filters.loose import position_reset, record_kalman_update, reopen_kf
-from tanbench.filters.propagate import dead_reckon
+from tanbench.filters.loose import navigation_step, position_reset, record_kalman_update, reopen_kf
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
@@ -73,7 +72,7 @@ from tanbench.filters.tight import keep_on_map
 from tanbench.filters.trig import attitude_reference, sin_cos
 from tanbench.navigation.eskf import (EB, EE, EN, EPSI, N_ERROR, copy_matrix, eskf_predict, eskf_update,
                                       fix_prior_chi2, terrain_only_fix)
-from tanbench.navigation.increments import JAZE, JAZN, SZ
+from tanbench.navigation.increments import SZ
 
 LOOSE_TURNED_COLS = np.array([E, N, YAW], dtype=np.int64)  # the rows the regularisation jitters
 # the navigation solution at the K updates: the (K-1, 12) increments, yaw, pitch, roll and up (K,); the body-frame
@@ -313,16 +312,8 @@ def loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out):
     consistent_chi = (0.5 * div.sigma) ** 2
     for k in range(steps):
         if k > 0:
-            e_before = nav[E, 0]
-            n_before = nav[N, 0]
             yaw_before = nav[YAW, 0]
-            s, c = math.sin(nav[YAW, 0] - nav_yaw[k - 1]), math.cos(nav[YAW, 0] - nav_yaw[k - 1])
-            b_e = -(c * inc[k - 1, JAZE] - s * inc[k - 1, JAZN])
-            b_n = -(s * inc[k - 1, JAZE] + c * inc[k - 1, JAZN])
-            nav[U, 0] = nav_up[k - 1]
-            dead_reckon(nav, inc[k - 1], nav_yaw[k - 1])
-            d_e = nav[E, 0] - e_before
-            d_n = nav[N, 0] - n_before
+            d_e, d_n, b_e, b_n = navigation_step(nav, inc[k - 1], nav_yaw[k - 1], nav_up[k - 1])
             dyaw = nav[YAW, 0] - yaw_before
             q_delta = math.sqrt(kf.q_yaw * kf.q_yaw + p_kf[EB, EB] * dt * dt)
             eskf_predict(p_kf, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
