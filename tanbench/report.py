@@ -443,8 +443,9 @@ def criterion_section(judged: dict, faithful_csv: Path | None = None) -> str:
               "Per profile: mean final error [95 % CI of the mean]; lost runs (final error above 75 m); ratio to the "
               "paper's mean; our runs above the paper's maximum / below its minimum. Verdict: **yes**, or which part "
               "fails (*mean*: the paper's mean outside the prediction interval; *range*: too many runs beyond an "
-              "extreme). A faithful copy passes a cell with probability %.3f-%.3f (the smallest over CRITERION.md's "
-              "scenarios, per cell)." % FAITHFUL_CELL_PASS, "",
+              "extreme). A faithful copy passes a cell with probability "
+              f"{FAITHFUL_CELL_PASS[0]:.3f}-{FAITHFUL_CELL_PASS[1]:.3f} (the smallest over CRITERION.md's scenarios, "
+              "per cell).", "",
               "| cell | method | paper mean [min, max] | " + " | ".join(f"{lab} | verdict" for lab in labels) + " |",
               "|" + "---|" * (3 + 2 * len(labels))]
     for setting, title in STATEMENT_CELLS:
