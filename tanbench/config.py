@@ -63,13 +63,15 @@ def new_option(default, *, neutral=_SAME, **field_kwargs):
 
 
 # the loose TAN's options that act only in its loop with heading offsets (filters/loose_turned.py): a value other
-# than the neutral one needs filter.loose_heading_offsets (checked in this order)
+# than the neutral one needs filter.loose_heading_offsets (named in this order)
 TURNED_LOOP_ONLY = ("loose_fix_fit_one_wild_beam", "loose_reopen_heading", "loose_reopen_position", "loose_first_fix",
                     "loose_fix_correlation_s")
 
 
 def _yaml_word(value) -> str:
     """An option's value as a sweep file spells it (true, false, cloud)."""
+    if value is None:
+        return "null"
     return str(value).lower() if isinstance(value, bool) else str(value)
 
 
@@ -557,18 +559,19 @@ class FilterSpec(_Strict):
 
     @model_validator(mode="after")
     def _gates_need_heading_offsets(self):
-        if not self.loose_heading_offsets and (self.loose_bias_gate_sigma is not None
-                                               or self.loose_fix_shape is not None
-                                               or self.loose_fix_prior_gate is not None):
-            raise ValueError("filter.loose_bias_gate_sigma, loose_fix_shape and loose_fix_prior_gate need "
-                             "filter.loose_heading_offsets: true (set them to null without it)")
-        if not self.loose_heading_offsets and not self.loose_fix_fit_test:
-            raise ValueError("filter.loose_fix_fit_test: false needs filter.loose_heading_offsets: true")
-        for name in () if self.loose_heading_offsets else TURNED_LOOP_ONLY:
-            value, neutral = getattr(self, name), type(self).model_fields[name].json_schema_extra["key_neutral"]
-            if value != neutral:
-                raise ValueError(f"filter.{name}: {_yaml_word(value)} needs filter.loose_heading_offsets: true "
-                                 f"(set it to {_yaml_word(neutral)} without it)")
+        if not self.loose_heading_offsets:
+            # every option that acts only in the loop with heading offsets, and the value it must take without it
+            allowed = {"loose_bias_gate_sigma": None, "loose_fix_shape": None, "loose_fix_prior_gate": None,
+                       "loose_fix_fit_test": True}
+            allowed.update({name: type(self).model_fields[name].json_schema_extra["key_neutral"]
+                            for name in TURNED_LOOP_ONLY})
+            wrong = [(name, getattr(self, name), value) for name, value in allowed.items()
+                     if getattr(self, name) != value]
+            if wrong:  # all of them in one line, so that one edit of the sweep file mends them
+                raise ValueError(", ".join(f"filter.{name}: {_yaml_word(value)}" for name, value, _ in wrong)
+                                 + (" needs" if len(wrong) == 1 else " need")
+                                 + " filter.loose_heading_offsets: true (without it set "
+                                 + ", ".join(f"{name}: {_yaml_word(value)}" for name, _, value in wrong) + ")")
         if self.kld_epsilon is not None and (self.tight_regularisation != "posterior" or self.regularisation == "none"):
             raise ValueError("filter.kld_epsilon needs filter.tight_regularisation: posterior and a regularisation "
                              "(the adaptive count is built on the posterior-sized kernel)")

@@ -256,3 +256,19 @@ def test_correlated_fixes_are_the_default_and_widen_the_kalman_covariance():
         assert out.metrics["fixes_accepted"] >= 10
         late[tau] = var[t >= 200].mean()
     assert late[40.0] > 2.0 * late[0.0]
+
+
+def test_heading_offsets_off_names_every_option_to_change_in_one_error():
+    """``filter.loose_heading_offsets: false`` with today's defaults: one error names every option that acts only with
+    heading offsets and the value each must take, so that one edit of the sweep file mends it."""
+    with pytest.raises(ValidationError) as caught:
+        Scenario(filter={"loose_heading_offsets": False})
+    text = str(caught.value)
+    for name, value in (("loose_bias_gate_sigma", "null"), ("loose_fix_shape", "null"),
+                        ("loose_fix_fit_one_wild_beam", "false"), ("loose_reopen_heading", "navigation"),
+                        ("loose_reopen_position", "prior"), ("loose_fix_correlation_s", "0.0")):
+        assert f"{name}: {value}" in text
+    fixed = {"loose_heading_offsets": False, "loose_bias_gate_sigma": None, "loose_fix_shape": None,
+             "loose_fix_fit_one_wild_beam": False, "loose_reopen_heading": "navigation",
+             "loose_reopen_position": "prior", "loose_fix_correlation_s": 0.0}
+    assert not Scenario(filter=fixed).filter.loose_heading_offsets
