@@ -14,6 +14,7 @@ map, the survey) is tanbench's own options.
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --unseen   # J25-J40 (section 10's test worlds)
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --section-17   # J41-J56 (section 17's)
     .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --section-18   # J57-J72 (section 18's)
+    .venv/bin/python examples/prototypes/heldout_relief.py OUT_DIR --topobathy    # J73-J80: another DEM (section 25)
     .venv/bin/tanbench run OUT_DIR/J1.yaml --out OUT_DIR/J1 --quiet --series none
     .venv/bin/python examples/prototypes/heldout_relief.py --summary RESULTS_DIR   # a table of RESULTS_DIR/J*/
 
@@ -60,6 +61,27 @@ SECTION_18_SETS = {
     "eighth": (57, ((0.3, 0.3), (0.7, 0.7), (0.3, 0.7), (0.7, 0.3)), 12.0, range(24240067, 24240075)),
     "ninth": (65, ((0.5, 0.4), (0.5, 0.6), (0.4, 0.5), (0.6, 0.5)), 36.0, range(24240075, 24240083)),
 }
+# a second DEM (docs/filters.md section 25), fixed before any run on it: matplotlib's sample `topobathy.npz`
+# (topography and bathymetry around 48-50 N, 122-126 W; 120 x 91 nodes about 2.4 km apart). A 2400 m window
+# holds only 1-2 of its nodes at their own spacing, so each set reads them closer, at one scale
+TOPOBATHY_SETS = {
+    "tenth": (73, ((0.35, 0.45), (0.65, 0.55), (0.45, 0.58), (0.55, 0.42)), 32.0, range(24240083, 24240087)),
+    "eleventh": (77, ((0.3, 0.35), (0.7, 0.35), (0.3, 0.65), (0.7, 0.65)), 40.0, range(24240087, 24240091)),
+}
+
+
+def read_topobathy() -> tuple[np.ndarray, float, float]:
+    """matplotlib's sample topography-bathymetry grid with row 0 south, and its node spacing east and north in
+    metres at its middle latitude."""
+    import matplotlib.cbook as cbook
+
+    d = cbook.get_sample_data("topobathy.npz")
+    lat, lon = np.asarray(d["latitude"], float), np.asarray(d["longitude"], float)
+    if not lat[1] > lat[0]:
+        raise SystemExit("topobathy.npz: the latitudes are not south to north")
+    dx = math.radians(lon[1] - lon[0]) * EARTH_R * math.cos(math.radians(0.5 * (lat[0] + lat[-1])))
+    dy = math.radians(lat[1] - lat[0]) * EARTH_R
+    return np.asarray(d["topo"], float), dx, dy
 
 
 def read_dem() -> tuple[np.ndarray, float, float]:
@@ -111,15 +133,20 @@ def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) ->
 
 
 # the flags that build a group of sets, and every set by name
-GROUPS = {"--all": SETS, "--unseen": UNSEEN_SETS, "--section-17": SECTION_17_SETS, "--section-18": SECTION_18_SETS}
+GROUPS = {"--all": SETS, "--unseen": UNSEEN_SETS, "--section-17": SECTION_17_SETS, "--section-18": SECTION_18_SETS,
+          "--topobathy": TOPOBATHY_SETS}
 ALL_SETS = {name: spec for group in GROUPS.values() for name, spec in group.items()}
 
 
 def main(out: Path, which: str = "first") -> None:
     out.mkdir(parents=True, exist_ok=True)
-    z, dx, dy = read_dem()
     first, centres, spacing, seed_range = ALL_SETS[which]
-    scales = ((dx, dy), (spacing, spacing))
+    if which in TOPOBATHY_SETS:  # its own spacing holds no window: the set's one scale
+        z, dx, dy = read_topobathy()
+        scales = ((spacing, spacing),)
+    else:
+        z, dx, dy = read_dem()
+        scales = ((dx, dy), (spacing, spacing))
     seeds = iter(seed_range)
     k = first - 1
     for res_e, res_n in scales:
