@@ -172,11 +172,13 @@ def _warn_incomplete(sweep, directory: Path) -> None:
     """One line on stderr naming the cells whose stored runs are not whole, and the command that completes them."""
     from tanbench.runner.resume import incomplete_cells
 
-    missing = incomplete_cells(sweep, directory)
+    missing, count = incomplete_cells(sweep, directory)
     if missing:
         cell, what = next(iter(missing.items()))
         more = f" and {len(missing) - 1} more cell(s)" if len(missing) > 1 else ""
-        command = _resume_command(directory / "sweep.yaml", directory, {})
+        # the run count the directory was run with, where it is not its sweep file's (run with --runs)
+        runs = {"--runs": count} if count and count != sweep.spec.runs else {}
+        command = _resume_command(directory / "sweep.yaml", directory, runs)
         typer.echo(f"warning: incomplete results: cell {cell} ({what}){more}; recompute what is missing with: "
                    f"{command}", err=True)
 

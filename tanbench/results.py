@@ -60,9 +60,10 @@ def load_series(directory, kind: str = "summary") -> pd.DataFrame:
     """The per-update series: ``"summary"`` (Monte Carlo statistics) or ``"runs"`` (every run)."""
     directory = Path(directory)
     if kind == "summary":
-        path = directory / "series" / "summary.parquet"
+        path = store.summary_file(directory)
         if not path.exists():
-            raise TanbenchError(f"{directory}: no series summary (was the sweep run with --series none?)")
+            raise TanbenchError(f"{directory}: no series summary (was the sweep run with --series none? `tanbench "
+                                f"run` of the directory's sweep into it without --series none writes it)")
         return store.read_parquet(path)
     if kind == "runs":
         base = store.series_dir(directory, full=True)
@@ -340,7 +341,7 @@ def build_outputs(out: Path, sweep, series: str, written: dict | None = None) ->
                 if store.cell_of(f) in ids:
                     files[(store.cell_of(f), f.name)] = f
         frames = _series_frames(sorted(files.items()), written)
-        summary_path = out / "series" / "summary.parquet"
+        summary_path = store.summary_file(out)
         if frames and summary_path.exists():
             kept = store.read_parquet(summary_path)
             kept = kept[kept["cell_id"].isin(ids - {cell for cell, _ in files})]

@@ -156,8 +156,8 @@ def read_meta(path: Path) -> dict:
     return _checked_meta(path, schema.metadata)
 
 
-RECOVERY = ("`tanbench run` of the directory's sweep into it sets a damaged run or series file aside and "
-            "recomputes its runs")
+RECOVERY = ("`tanbench run` of the directory's sweep into it sets a damaged run or series file, or series summary, "
+            "aside and recomputes what it held")
 
 
 def _first_line(exc: BaseException) -> str:
@@ -220,6 +220,23 @@ def run_file(out: Path, cell_id: str, run: int) -> Path:
 def series_dir(out: Path, full: bool) -> Path:
     """Where per-run series live: ``series/runs`` (--series full) or ``.work/series`` (summary)."""
     return out / "series" / "runs" if full else out / ".work" / "series"
+
+
+def summary_file(out: Path) -> Path:
+    """The series summary: the Monte Carlo statistics over time of every cell (``results.build_outputs``)."""
+    return out / "series" / "summary.parquet"
+
+
+def unreadable_summary(out: Path) -> str | None:
+    """Why ``out``'s series summary cannot be read (its first line), or None (readable, or none there)."""
+    path = summary_file(out)
+    if not path.exists():
+        return None
+    try:
+        pq.read_metadata(path)
+    except (OSError, pa.ArrowException) as exc:
+        return _first_line(exc)
+    return None
 
 
 def series_file(out: Path, cell_id: str, run: int, full: bool) -> Path:

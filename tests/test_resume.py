@@ -372,11 +372,53 @@ def test_an_unreadable_run_file_is_one_line_then_set_aside_and_recomputed(tiny, 
     tables = cli("tables", out)
     lines = [line for line in tables.stderr.splitlines() if line.strip()]
     assert tables.returncode == 2 and len(lines) == 1 and "not a readable Parquet file" in lines[0], tables.stderr
-    assert "sets a damaged run or series file aside and recomputes its runs" in lines[0]
+    assert "sets a damaged run or series file, or series summary, aside and recomputes what it held" in lines[0]
     again = cli("run", path, "--out", out, "--workers", 1, "-q")
     assert again.returncode == 0, again.stderr
     assert f"note: {victim} cannot be read" in again.stderr and victim.with_name(".runs.parquet.damaged").exists()
     assert_same_runs(results.load(out), results.load(tiny[1]))
+
+
+@pytest.mark.parametrize("clone", [False, True], ids=["with-run-series", "clone-summary-only"])
+def test_an_unreadable_series_summary_is_named_then_set_aside_and_rebuilt(tiny, tmp_path, clone):
+    """A damaged series/summary.parquet: ``tables`` names it (with the command that mends it), ``run`` sets it aside
+    and rebuilds it from the runs' series files, recomputing the runs that have none (a clone of committed
+    results keeps only the summary); the rebuilt summary equals the one it replaces."""
+    path, out = copied(tiny, tmp_path)
+    if clone:
+        shutil.rmtree(out / ".work")
+    summary = out / "series" / "summary.parquet"
+    summary.write_bytes(b"junk")
+    tables = cli("tables", out)
+    assert tables.returncode == 0 and "the series summary cannot be read" in tables.stderr, tables.stderr
+    assert "plot" not in tables.stderr and f"tanbench run {out / 'sweep.yaml'} --out {out}" in tables.stderr
+    plot = cli("plot", out)
+    assert plot.returncode == 2 and "not a readable Parquet file" in plot.stderr and "series summary" in plot.stderr
+    again = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert again.returncode == 0, again.stderr
+    assert f"note: {summary} cannot be read" in again.stderr and summary.with_name(".summary.parquet.damaged").exists()
+    assert f"{counted(6 if clone else 0)} run" in again.stdout
+    pd.testing.assert_frame_equal(pd.read_parquet(summary), pd.read_parquet(tiny[1] / "series" / "summary.parquet"))
+    assert "warning" not in cli("tables", out).stderr
+
+
+def test_a_cell_with_fewer_runs_than_the_others_is_incomplete_and_the_command_keeps_the_run_count(tiny, tmp_path):
+    """A sweep stopped part-way leaves cells with fewer runs than others: ``tables`` warns, and the command it prints
+    asks for the run count the directory holds (``--runs``), not the sweep file's, so it recomputes only the missing
+    runs."""
+    path, out = copied(tiny, tmp_path)
+    runs_file = sorted((out / "runs").glob("cell_id=*/runs.parquet"))[0]
+    cell = runs_file.parent.name.split("=", 1)[1]
+    table = pq.read_table(runs_file)
+    df = table.to_pandas()
+    pq.write_table(pa.Table.from_pandas(df[df["run"] < 2], schema=table.schema, preserve_index=False), runs_file)
+    (out / ".work" / "series" / f"cell_id={cell}" / "run-00002.parquet").unlink()
+    sweep_text = (out / "sweep.yaml").read_text()
+    (out / "sweep.yaml").write_text(sweep_text.replace("runs: 3", "runs: 8"))  # the file's runs, not the stored count
+    tables = cli("tables", out)
+    assert f"cell {cell} (missing run 2 of " in tables.stderr and "--runs 3" in tables.stderr, tables.stderr
+    again = cli("run", out / "sweep.yaml", "--out", out, "--workers", 1, "-q", "--runs", 3)
+    assert again.returncode == 0 and f"{counted(1)} run, {counted(5)} already done" in again.stdout, again.stderr
 
 
 def snapshot(root: Path) -> dict[str, bytes]:

@@ -85,6 +85,7 @@ class ResumeState:
     owner_from: str = "sweep.yaml"
     stored_seeds: set = field(default_factory=set)  # root seeds of every stored run file
     damaged_cells: set = field(default_factory=set)  # cells with an unreadable run file (every run to redo)
+    summary_damaged: bool = False  # the series summary cannot be read: every run needs its own series file
 
     @classmethod
     def read(cls, sweep: Sweep, out: Path) -> "ResumeState":
@@ -99,8 +100,10 @@ class ResumeState:
         ids = {c.cell_id for c in sweep.cells}
         rows = everything[everything["cell_id"].isin(ids)].reset_index(drop=True)
         series, damaged_series = store.series_runs(out, check=True)
-        state = cls(sweep, out, rows, damaged + damaged_series, series, terrain, codes, owner, owner_from,
-                    stored_seeds, {store.cell_of(p) for p, _ in damaged})
+        summary = store.unreadable_summary(out)
+        damaged_summary = [(store.summary_file(out), summary)] if summary is not None else []
+        state = cls(sweep, out, rows, damaged + damaged_series + damaged_summary, series, terrain, codes, owner,
+                    owner_from, stored_seeds, {store.cell_of(p) for p, _ in damaged}, summary is not None)
         state.rows = state._mark_stale(rows)
         return state
 
@@ -138,6 +141,8 @@ class ResumeState:
                   if t.cell_id not in self.damaged_cells and all((*t.key, m) in have for m in t.methods)}
         if not need_series:
             return stored
+        if self.summary_damaged:  # no summary to keep a cell's rows from: each run's own series file rebuilds it
+            return {key for key in stored if key in self.series}
         keeps = {cell for cell, _ in self.series} | {t.cell_id for t in tasks if t.key not in stored}
         return {key for key in stored if key in self.series or key[0] not in keeps}
 
@@ -180,8 +185,9 @@ class ResumeState:
                            f"cell(s): {'; '.join(what[w] for w in why)}" +
                            (f" (now: {self.codes[method]})" if "code" in why else ""))
         for path, reason in self.damaged:
-            notices.append(f"note: {path} cannot be read ({reason}): set aside as .{path.name}.damaged; its runs "
-                           f"are recomputed")
+            what = ("it is rebuilt from the runs' series files, and runs without one are recomputed"
+                    if path == store.summary_file(self.out) else "its runs are recomputed")
+            notices.append(f"note: {path} cannot be read ({reason}): set aside as .{path.name}.damaged; {what}")
         return notices
 
     def _refusal(self, refused: pd.DataFrame) -> str:
@@ -231,34 +237,40 @@ def _owner(out: Path, rows: pd.DataFrame) -> tuple[str | None, str]:
         return None, "runs"
 
 
-def incomplete_cells(sweep: Sweep, out: Path) -> dict[str, str]:
-    """Per cell of ``sweep`` whose stored runs in ``out`` are not whole: what is missing.
+def incomplete_cells(sweep: Sweep, out: Path) -> tuple[dict[str, str], int]:
+    """Per cell of ``sweep`` whose stored runs in ``out`` are not whole: what is missing; and the directory's run
+    count, the most runs any of the sweep's cells holds (the ``--runs`` it was run with).
 
-    A cell is whole when every method of the sweep has a row for every run index from 0
-    to the largest stored, and, in a directory that keeps series, every such run has a
-    readable series file. (What ``tables`` and ``plot`` show of a cell that is not whole
-    is not what was run; a rerun of the sweep into the directory recomputes what is missing.)
+    A cell is whole when every method of the sweep has a row for every run index below that count, and, in a
+    directory that keeps series, every such run has a readable series file; an unreadable series summary makes
+    every cell not whole. (What ``tables`` and ``plot`` show of a cell that is not whole is not what was run; a
+    rerun of the sweep into the directory, with ``--runs`` that count, recomputes what is missing.)
     """
     rows, damaged = store.read_run_index(out) if (out / "runs").is_dir() else (
         pd.DataFrame(columns=store.RUN_INDEX_COLUMNS), [])
     series, damaged_series = store.series_runs(out, check=True)
     keeps_series = {cell for cell, _ in series} | {store.cell_of(p) for p, _ in damaged_series}
     unreadable = {store.cell_of(p) for p, _ in damaged}
+    summary = store.unreadable_summary(out)
+    mine = rows[rows["cell_id"].isin({c.cell_id for c in sweep.cells}) & rows["method"].isin(sweep.spec.methods)]
+    count = int(mine["run"].max()) + 1 if len(mine) else 0
     out_cells = {}
     for cell in sweep.cells:
         if cell.cell_id in unreadable:
             out_cells[cell.cell_id] = "a run file cannot be read"
             continue
-        mine = rows[(rows["cell_id"] == cell.cell_id) & rows["method"].isin(sweep.spec.methods)]
-        if mine.empty:
+        if summary is not None:
+            out_cells[cell.cell_id] = f"the series summary cannot be read: {summary}"
+            continue
+        held = mine[mine["cell_id"] == cell.cell_id]
+        if held.empty:
             out_cells[cell.cell_id] = "no stored runs"
             continue
-        runs = range(int(mine["run"].max()) + 1)
-        have = set(zip(mine["run"].astype(int), mine["method"]))
-        lacking = [f"run {r} of {m}" for r in runs for m in sweep.spec.methods if (r, m) not in have]
+        have = set(zip(held["run"].astype(int), held["method"]))
+        lacking = [f"run {r} of {m}" for r in range(count) for m in sweep.spec.methods if (r, m) not in have]
         if cell.cell_id in keeps_series:  # some series here: each run's (none: a clone keeps only the summary)
-            lacking += [f"run {r}'s series file" for r in runs if (cell.cell_id, r) not in series]
+            lacking += [f"run {r}'s series file" for r in range(count) if (cell.cell_id, r) not in series]
         if lacking:
             more = f" and {len(lacking) - 3} more" if len(lacking) > 3 else ""
             out_cells[cell.cell_id] = f"missing {', '.join(lacking[:3])}{more}"
-    return out_cells
+    return out_cells, count
