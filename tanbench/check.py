@@ -399,9 +399,25 @@ def render(result: CheckResult) -> str:
     return "\n".join(lines)
 
 
+REPORT_SUFFIXES = (".parquet", ".md", ".json")
+
+
+def check_report_path(path: Path) -> None:
+    """Refuse a ``--report`` path the comparison could not be written to, before any work: its suffix must be one
+    of REPORT_SUFFIXES, it must not be a directory, and its directory must exist."""
+    path = Path(path)
+    if path.suffix.lower() not in REPORT_SUFFIXES:
+        raise TanbenchError(f"--report {path}: use a .parquet, .md or .json file name")
+    if path.is_dir():
+        raise TanbenchError(f"--report {path}: is a directory; give a file name")
+    if not path.parent.is_dir():
+        raise TanbenchError(f"--report {path}: its directory {path.parent} does not exist")
+
+
 def write_report(result: CheckResult, path: Path) -> None:
     """Write the comparison as .parquet, .md or .json (by extension)."""
     path = Path(path)
+    check_report_path(path)
     suffix = path.suffix.lower()
     try:
         if suffix == ".parquet":
@@ -414,8 +430,6 @@ def write_report(result: CheckResult, path: Path) -> None:
                                         "only_new": result.only_new, "only_baseline": result.only_baseline,
                                         "missing": result.missing, "regressed": result.regressed,
                                         "underpowered": result.underpowered}, indent=1))
-        else:
-            raise TanbenchError(f"--report {path}: use a .parquet, .md or .json file name")
     except OSError as exc:
         raise TanbenchError(f"cannot write {path}: {exc.strerror or exc}") from None
 

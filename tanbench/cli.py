@@ -208,9 +208,12 @@ def plan(
     from tanbench.runner.resume import ResumeState
     from tanbench.runner.validate import check_methods
 
+    from tanbench.store import check_directory_path
+
     sweep = _loaded(sweep_file, runs)
     check_methods(sweep)
     out = _out_path(out, sweep)
+    check_directory_path(out)  # as run would refuse it
     p = make_plan(sweep, out, ResumeState.read(sweep, out), workers)
     n_m = len(sweep.spec.methods)
     typer.echo(f"sweep {sweep.name}: {len(sweep.cells)} cell(s) x {n_m} method(s) x {sweep.spec.runs} run(s) "
@@ -644,8 +647,10 @@ def check(
     batch: int = typer.Option(30, "--batch", min=1, help="Runs per cell added at each look (--until-decisive)."),
     cap: int = typer.Option(300, "--cap", min=1, help="Most runs per cell (--until-decisive)."),
 ):
-    from tanbench.check import CheckOptions, compare, render, write_report
+    from tanbench.check import CheckOptions, check_report_path, compare, render, write_report
 
+    if report is not None:  # before any work: --until-decisive adds runs to both directories
+        check_report_path(report)
     opts = CheckOptions(margin_rel=margin_rel, margin_abs=margin_abs, alpha=alpha, nees=nees,
                         nees_margin_abs=nees_margin, ignore=tuple(ignore or ()), pool=pool,
                         lost_detect=lost_detect, min_runs=min_runs)

@@ -453,13 +453,18 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def check_writable(out: Path) -> None:
-    """Create ``out`` if needed and make sure files can be written there."""
+def check_directory_path(out: Path) -> None:
+    """Refuse an output path that is, or lies under, a file (creates nothing)."""
     if out.exists() and not out.is_dir():
         raise TanbenchError(f"output directory {out} is a file, not a directory (give --out a directory)")
     for parent in out.parents:
         if parent.exists() and not parent.is_dir():
             raise TanbenchError(f"output directory {out}: {parent} is a file, not a directory")
+
+
+def check_writable(out: Path) -> None:
+    """Create ``out`` if needed and make sure files can be written there."""
+    check_directory_path(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / f".write-test.{os.getpid()}"

@@ -259,6 +259,8 @@ CASES = [
          setup=unwritable_output),
     case("output-is-a-regular-file", ["run", "{sweep}", "--out", "{out}"], BASE,
          "output directory {tmp}/a-file is a file, not a directory", setup=regular_file),
+    case("plan-output-is-a-regular-file", ["plan", "{sweep}", "--out", "{out}"], BASE,
+         "output directory {tmp}/a-file is a file, not a directory", setup=regular_file),
     # names that become paths (results/<sweep>, DIR/tables/<table>.parquet)
     *[case(f"table-name-{label}", ["run", "{sweep}", "--out", "{out}"],
            sweep(tables={name: {"noise_m": [1.0]}}), "tables: table name", "cannot be used as a file name",
@@ -328,6 +330,11 @@ CASES = [
          setup=baseline_missing_cells, code=1),
     case("check-missing-cells-allowed", ["check", "{out}", str(BASELINE), "--allow-missing", "--allow-underpowered"], None,
          "missing: cell only in BASELINE: ", "2 missing", setup=baseline_missing_cells, code=0),
+    # a --report the comparison could not be written to is refused before the comparison (no table printed)
+    case("check-report-unknown-suffix", ["check", "{out}", str(BASELINE), "--report", "{tmp}/r.xlsx"], None,
+         "--report {tmp}/r.xlsx: use a .parquet, .md or .json file name", setup=stored_results, absent=("| ",)),
+    case("check-report-no-such-directory", ["check", "{out}", str(BASELINE), "--report", "{tmp}/no/r.md"], None,
+         "its directory {tmp}/no does not exist", setup=stored_results, absent=("| ",)),
     case("check-missing-runs-and-method", ["check", str(BASELINE), "{out}"], None,
          f"missing: method loose-dvl only in NEW: cell {CI_CELL}",
          f"missing: runs {CI_RUNS - 2}, {CI_RUNS - 1} of tight-dvl only in NEW (ok runs): cell {CI_CELL}", "9 missing",

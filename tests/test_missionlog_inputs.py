@@ -187,7 +187,11 @@ def test_the_cli_refuses_with_one_line_and_exit_2(base, tmp_path):
     (tmp_path / "bad.yaml").write_text("particles: 300\nfilter: {resampling: sometimes}\n")
     (tmp_path / "sweep-results").mkdir()
     (tmp_path / "sweep-results" / "sweep.yaml").write_text("name: x\n")
+    (tmp_path / "replay-results").mkdir()
+    (tmp_path / "replay-results" / "replay.yaml").write_text("log: x\n")
     cases = [
+        (["run", "configs/quick.yaml", "--runs", "1", "--out", tmp_path / "replay-results"],
+         "holds a replay's results"),
         (["replay", d / "log", "--map", d / "map.npz", "--settings", tmp_path / "bad.yaml", "--out", tmp_path / "o"],
          "filter.resampling: Input should be"),
         (["replay", d / "log", "--map", d / "map.npz", "--out", tmp_path / "sweep-results"], "holds a sweep's results"),
@@ -203,6 +207,7 @@ def test_the_cli_refuses_with_one_line_and_exit_2(base, tmp_path):
         assert message in lines[0], (message, lines[0])
         assert "Traceback" not in proc.stderr
     assert not (tmp_path / "o").exists() and not (tmp_path / "sweep-results" / "runs.parquet").exists()
+    assert sorted(p.name for p in (tmp_path / "replay-results").iterdir()) == ["replay.yaml"]
 
 
 def test_replay_help_is_plain_and_points_to_the_format():

@@ -156,6 +156,8 @@ def check_output(sweep: Sweep, out: Path) -> None:
     if str(out).strip() == "":
         raise TanbenchError("--out '': give the results directory a name")
     resolved = Path(os.path.abspath(out))
+    if (resolved / "replay.yaml").is_file():  # tanbench replay's output (missions/replay.py), which refuses ours too
+        raise TanbenchError(f"--out {out}: holds a replay's results (replay.yaml); use another directory")
     for parent in resolved.parents:
         if (parent / "sweep.yaml").is_file() and ((parent / "runs").is_dir() or (parent / "tables").is_dir()):
             raise TanbenchError(f"--out {out} is inside the results directory {parent}: give the sweep a directory "
