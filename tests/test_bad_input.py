@@ -353,6 +353,8 @@ CASES = [
                          "off_map_points,map_rms_10m,map_rms_20m,map_rms_30m")),
     case("dask-scheduler-not-answering", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "tcp://127.0.0.1:1"],
          BASE, "cannot reach the Dask scheduler at tcp://127.0.0.1:1", hang_s=120),
+    case("dask-scheduler-malformed", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "bogus"],
+         BASE, "--scheduler bogus: not a Dask scheduler address", "give HOST:PORT", absent=("within",)),
 ]
 
 

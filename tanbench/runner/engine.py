@@ -33,8 +33,8 @@ from tqdm import tqdm
 
 from tanbench import __version__, kernel_cache, store
 from tanbench.config import flatten
-from tanbench.errors import describe_exception
-from tanbench.runner.executors import open_executor, warm_up, warm_up_side_by_side
+from tanbench.errors import TanbenchError, describe_exception
+from tanbench.runner.executors import check_scheduler_address, open_executor, warm_up, warm_up_side_by_side
 from tanbench.runner.plan import (Plan, builtin_methods, cell_kernels, check_series_mode, compile_groups,
                                   compile_processes, cpu_load_now, machine_compile_seconds, make_plan, share_of_each)
 from tanbench.runner.resume import ResumeState
@@ -187,9 +187,24 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     ``note`` prints what the sweep will recompute and why (stderr by default).
     """
     check_series_mode(series)
+    check_scheduler_address(scheduler)
     validate_sweep(sweep)
     check_output(sweep, out)
+    created = not out.exists()
     store.check_writable(out)
+    try:
+        return _run_into(sweep, out, workers, scheduler, series, force, progress, echo, add, note)
+    except TanbenchError:
+        if created:  # refused before anything was stored (e.g. a scheduler that does not answer): leave no trace
+            try:
+                out.rmdir()
+            except OSError:
+                pass
+        raise
+
+
+def _run_into(sweep: Sweep, out: Path, workers, scheduler, series, force, progress, echo, add, note) -> RunReport:
+    """:func:`run_sweep` once ``out`` is checked and writable."""
     store.remove_stale_temporaries(out)
     state = ResumeState.read(sweep, out)
     for line in state.check(force=force, add=add):

@@ -356,6 +356,24 @@ def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None =
                     pass
 
 
+def check_scheduler_address(scheduler: str | None) -> None:
+    """Refuse a ``--scheduler`` that is not an address a Dask client could connect to (nor ``local-dask``), before
+    anything is created: a malformed address is a mistake to name, not a scheduler that did not answer."""
+    if scheduler is None or scheduler == "local-dask":
+        return
+    try:
+        from distributed.comm.addressing import parse_address, parse_host_port
+    except ImportError:
+        raise TanbenchError("--scheduler needs Dask: pip install 'tanbench[dask]'") from None
+    try:
+        protocol, location = parse_address(scheduler)
+        if protocol in ("tcp", "tls"):
+            parse_host_port(location)
+    except ValueError as exc:
+        raise TanbenchError(f"--scheduler {scheduler}: not a Dask scheduler address ({str(exc).splitlines()[0]}); "
+                            f"give HOST:PORT, tcp://HOST:PORT or local-dask") from None
+
+
 @contextmanager
 def _dask_client(workers: int, scheduler: str):
     try:
