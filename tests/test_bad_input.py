@@ -236,6 +236,8 @@ CASES = [
          "nothere.npy: file not found"),
     case("garbage-tif", ["validate", "{sweep}"], file_sweep("{maps}/garbage.tif"),
          "garbage.tif: not a readable TIFF file"),
+    case("text-file-named-npy", ["validate", "{sweep}"], file_sweep("{maps}/text.npy"),
+         "text.npy: not a numeric NumPy array file (object/pickled data is refused)", absent=("allow_pickle",)),
     case("map-path-is-a-directory", ["validate", "{sweep}"], file_sweep("{maps}/a-directory.npy"),
          "a-directory.npy: not a regular file"),
     case("unknown-map-format", ["validate", "{sweep}"], file_sweep("{maps}/map.xyz"),
@@ -573,6 +575,7 @@ def maps(tmp_path_factory):
     np.save(d / "holes.npy", holes)
     (d / "garbage.tif").write_bytes(b"\x00 this is not a TIFF \xff" * 40)
     (d / "map.xyz").write_text("0 0 -60\n5 0 -61\n")
+    (d / "text.npy").write_text("hello")
     (d / "a-directory.npy").mkdir()
     return d
 
