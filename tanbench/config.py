@@ -119,8 +119,20 @@ def _short_repr(value, limit: int = 80) -> str:
 
 
 def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
-    """The first pydantic error of a spec as one line: 'key.path: message (got value)'."""
-    err = exc.errors()[0]
+    """Every pydantic error of a spec (the first MAX_PROBLEMS) as one line: 'key.path: message (got value); ...'."""
+    errors = exc.errors()
+    parts = [_format_problem(err, prefix) for err in errors[:MAX_PROBLEMS]]
+    more = len(errors) - MAX_PROBLEMS
+    if more > 0:
+        parts.append(f"and {more} more problem{'s' if more > 1 else ''}")
+    return "; ".join(parts)
+
+
+MAX_PROBLEMS = 5  # named in one validation error line; the rest are counted
+
+
+def _format_problem(err: dict, prefix: str) -> str:
+    """One pydantic error as 'key.path: message (got value)'."""
     loc = ".".join(str(p) for p in err["loc"])
     loc = f"{prefix}{loc}" if loc else prefix.rstrip(".")
     msg = err["msg"]
@@ -131,9 +143,7 @@ def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
     got = err.get("input")
     shown = "" if err["type"] in ("extra_forbidden", "missing") or isinstance(got, (dict, list)) else \
         f" (got {_short_repr(got)})"
-    more = len(exc.errors()) - 1
-    tail = f"; and {more} more problem{'s' if more > 1 else ''}" if more else ""
-    return " ".join(f"{loc}: {msg}{shown}{tail}".split()) if loc else " ".join(f"{msg}{shown}{tail}".split())
+    return " ".join(f"{loc}: {msg}{shown}".split()) if loc else " ".join(f"{msg}{shown}".split())
 
 
 class _Strict(BaseModel):

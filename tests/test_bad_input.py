@@ -194,6 +194,13 @@ CASES = [
     case("negative-runs", ["run", "{sweep}", "--out", "{tmp}/out"], sweep(runs=-3),
          "runs: Input should be greater than 0"),
     case("missing-seed", ["validate", "{sweep}"], sweep("seed"), "seed: Field required"),
+    case("missing-seed-and-runs", ["validate", "{sweep}"], sweep("seed", "runs"),
+         "seed: Field required; runs: Field required", absent=("more problem",)),
+    case("seven-problems-name-five", ["validate", "{sweep}"],
+         sweep(scenario__particles=0, scenario__duration_s=-1, scenario__noise_m=-1, scenario__map_resolution_m=0,
+               scenario__sampling_time_s=0, scenario__colour="red", scenario__shade="blue"),
+         "scenario.map_resolution_m: Input should be greater than 0 (got 0); noise_m: ",
+         "duration_s: Input should be greater than 0 (got -1); and 2 more problems"),
     case("zero-map-resolution", ["validate", "{sweep}"], sweep(scenario__map_resolution_m=0),
          "scenario.map_resolution_m: Input should be greater than 0"),
     case("negative-map-resolution-in-a-table", ["validate", "{sweep}"],
@@ -229,6 +236,8 @@ CASES = [
          "nothere.npy: file not found"),
     case("garbage-tif", ["validate", "{sweep}"], file_sweep("{maps}/garbage.tif"),
          "garbage.tif: not a readable TIFF file"),
+    case("text-file-named-npy", ["validate", "{sweep}"], file_sweep("{maps}/text.npy"),
+         "text.npy: not a numeric NumPy array file (object/pickled data is refused)", absent=("allow_pickle",)),
     case("map-path-is-a-directory", ["validate", "{sweep}"], file_sweep("{maps}/a-directory.npy"),
          "a-directory.npy: not a regular file"),
     case("unknown-map-format", ["validate", "{sweep}"], file_sweep("{maps}/map.xyz"),
@@ -575,6 +584,7 @@ def maps(tmp_path_factory):
     np.save(d / "holes.npy", holes)
     (d / "garbage.tif").write_bytes(b"\x00 this is not a TIFF \xff" * 40)
     (d / "map.xyz").write_text("0 0 -60\n5 0 -61\n")
+    (d / "text.npy").write_text("hello")
     (d / "a-directory.npy").mkdir()
     return d
 

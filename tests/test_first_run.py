@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import re
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from sweep_support import ROOT, cli
+from sweep_support import ROOT, cli, cli_env
 from tanbench import kernel_cache
 from tanbench.runner import plan as planning
 from tanbench.sweep import load_sweep
@@ -213,6 +215,13 @@ def test_help_text_is_plain(command):
         flat = " ".join(proc.stdout.split())
         assert re.search(r"--workers <int range> [^-]*\[default: the cores available\]", flat), proc.stdout
         assert re.search(r"--runs <int range> Override the sweep's runs per cell", flat), proc.stdout
+
+
+def test_python_dash_m_tanbench_is_the_cli():
+    """`python -m tanbench` runs the console script's app (it had no __main__ module)."""
+    proc = subprocess.run([sys.executable, "-m", "tanbench", "--version"], capture_output=True, text=True,
+                          env=cli_env(), cwd=ROOT, timeout=120)
+    assert proc.returncode == 0 and proc.stdout.startswith("tanbench "), proc.stderr
 
 
 def test_plot_reaches_every_cell_and_titles_name_it(tmp_path, monkeypatch):

@@ -35,7 +35,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("missions", ("tanbench.missions",)),
     ("analysis", ("tanbench.suitability", "tanbench.prediction", "tanbench.plot", "tanbench.anatomy",
                   "tanbench.paper", "tanbench.fit", "tanbench.report", "tanbench.bench", "tanbench.testing")),
-    ("cli", ("tanbench.cli",)),
+    ("cli", ("tanbench.cli", "tanbench.__main__")),
 ]
 ALLOWED_CIRCLES = [{"tanbench.runner.executors", "tanbench.runner.dask_plugin"}]
 

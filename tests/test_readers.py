@@ -377,6 +377,19 @@ def test_npy_without_georeferencing_is_an_error(tmp_path):
     raises_naming(path, read_grid, path, bounds=BOUNDS, origin=(0, 0), rows="south_to_north")
 
 
+def test_npy_npz_with_text_or_object_data_are_refused_plainly(tmp_path):
+    """A text file renamed .npy/.npz, or object arrays: one plain line, not numpy's advice to load it unsafely."""
+    text_npy, text_npz, obj_npy, obj_npz = (tmp_path / n for n in ("text.npy", "text.npz", "obj.npy", "obj.npz"))
+    text_npy.write_text("hello")
+    text_npz.write_text("hello")
+    np.save(obj_npy, np.array([{"z": 1}, 2], dtype=object))
+    np.savez(obj_npz, z=np.array([{"z": 1}, 2], dtype=object))
+    for path in (text_npy, text_npz, obj_npy, obj_npz):
+        msg = raises_naming(path, read_grid, path, origin=(E0, N0), resolution=(RE, RN),
+                            match="not a numeric NumPy array file (object/pickled data is refused)")
+        assert "allow_pickle" not in msg, msg
+
+
 # --------------------------------------------------------------------------- generic errors
 
 

@@ -10,12 +10,20 @@ from tanbench.errors import TanbenchError
 from tanbench.terrain.formats.registry import RawGrid, as_2d, register_format
 
 
+def _unreadable(path: Path, kind: str, exc: Exception) -> TanbenchError:
+    """np.load's failure as one line; its pickle refusal (a text file, or object arrays) without its
+    advice to load the file unsafely."""
+    if isinstance(exc, ValueError) and "allow_pickle" in str(exc):
+        return TanbenchError(f"{path}: not a numeric NumPy array file (object/pickled data is refused)")
+    return TanbenchError(f"{path}: not a readable {kind} file ({type(exc).__name__}: {exc})")
+
+
 def read_npy(path: Path) -> RawGrid:
     """A bare 2-D array: georeferencing comes from the arguments."""
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as exc:
-        raise TanbenchError(f"{path}: not a readable .npy file ({type(exc).__name__}: {exc})") from None
+        raise _unreadable(path, ".npy", exc) from None
     return RawGrid(as_2d(z, path))
 
 
@@ -26,7 +34,7 @@ def read_npz(path: Path) -> RawGrid:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {key: npz[key] for key in npz.files}
     except Exception as exc:
-        raise TanbenchError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+        raise _unreadable(path, ".npz", exc) from None
     if "z" in arrays:
         zkey = "z"
     else:
