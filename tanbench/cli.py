@@ -377,6 +377,10 @@ def simulate(
         raise TanbenchError(f"--log-format must be parquet or csv, not {log_format!r}")
     if lonlat and log is None:
         raise TanbenchError("--lonlat applies to the mission log: give --log DIR")
+    if log is not None:
+        from tanbench.missions.logfile import check_log_directory
+
+        check_log_directory(log)  # before the simulation, not after it
     if sweep_file is not None:
         from tanbench.sweep import load_sweep
 

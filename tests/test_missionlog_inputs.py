@@ -199,6 +199,8 @@ def test_the_cli_refuses_with_one_line_and_exit_2(base, tmp_path):
          "--lonlat needs a map georeferenced in lon/lat or Web Mercator"),
         (["simulate", "--area", "A", "--sweep", "configs/quick.yaml", "--log", tmp_path / "o"],
          "give --area or --sweep, not both"),
+        (["simulate", "--area", "A", "--duration", "20", "--log", tmp_path / "bad.yaml"],
+         "exists and is not a directory"),
     ]
     for args, message in cases:
         proc = cli(*args)

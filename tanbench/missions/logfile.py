@@ -250,6 +250,15 @@ def _check_beam_blocks(log: MissionLog) -> None:
 # ---- writing -------------------------------------------------------------------------------
 
 
+def check_log_directory(directory: Path) -> None:
+    """Refuse a directory a mission log cannot be written into: a file, or a directory that holds something other
+    than a mission log (checked before the run is simulated, and again when it is written)."""
+    if directory.exists() and not directory.is_dir():
+        raise TanbenchError(f"{directory}: exists and is not a directory")
+    if directory.is_dir() and any(directory.iterdir()) and not (directory / META_FILE).is_file():
+        raise TanbenchError(f"{directory}: not empty and not a mission log; use a new directory")
+
+
 def write_log(directory, log: MissionLog, fmt: str = "parquet") -> list[Path]:
     """Write ``log`` into ``directory`` (tables as ``fmt``: parquet or csv); returns the files.
 
@@ -261,10 +270,7 @@ def write_log(directory, log: MissionLog, fmt: str = "parquet") -> list[Path]:
     directory = Path(directory)
     if fmt not in ("parquet", "csv"):
         raise TanbenchError(f"mission-log tables are parquet or csv, not {fmt!r}")
-    if directory.exists() and not directory.is_dir():
-        raise TanbenchError(f"{directory}: exists and is not a directory")
-    if directory.is_dir() and any(directory.iterdir()) and not (directory / META_FILE).is_file():
-        raise TanbenchError(f"{directory}: not empty and not a mission log; use a new directory")
+    check_log_directory(directory)
     written = []
     try:
         for name, df in log.tables.items():
