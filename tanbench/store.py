@@ -28,6 +28,7 @@ import datetime as _dt
 import json
 import os
 import subprocess
+from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
 
@@ -451,6 +452,50 @@ def _alive(pid: int) -> bool:
     except OSError:  # EPERM: alive, someone else's
         return True
     return True
+
+
+LOCK_FILE = ".tanbench.lock"
+
+
+@contextmanager
+def directory_lock(out: Path):
+    """Hold ``out``'s lock while a sweep writes there: a second ``tanbench run`` into the same directory is refused
+    with one line (it would compute the same tasks again). ``fcntl.flock`` on ``out/.tanbench.lock``, released by the
+    system when the process ends however it ends (no stale lock after a kill); the file, holding the writer's pid,
+    is removed when the lock is let go, so a directory looks the same after a run as before. Where ``fcntl`` is
+    missing (Windows) nothing is locked."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    path = out / LOCK_FILE
+    while True:
+        fh = open(path, "a+")
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.seek(0)
+            pid = fh.read().strip()
+            fh.close()
+            raise TanbenchError(f"{out} is being written by another tanbench run{f' (pid {pid})' if pid else ''}: "
+                                f"wait for it to end, or use another --out") from None
+        try:
+            same = os.fstat(fh.fileno()).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:  # not a file a writer that just ended had unlinked: ours
+            break
+        fh.close()
+    try:
+        fh.seek(0)
+        fh.truncate()
+        fh.write(str(os.getpid()))
+        fh.flush()
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+        fh.close()
 
 
 def check_directory_path(out: Path) -> None:

@@ -27,7 +27,7 @@ from sweep_support import (
     assert_same_runs, child_pids, cli, cli_env, finished_runs, gone, kill_group, load_tables, start_cli, sweep_dict,
     wait_for_runs, write_sweep,
 )
-from tanbench import results
+from tanbench import results, store
 from tanbench.runner.executors import WORKER_NAME
 from tanbench.sweep import load_sweep
 
@@ -438,3 +438,30 @@ def test_another_seed_is_refused_even_with_force_and_nothing_is_deleted(tiny, tm
         assert proc.returncode == 2 and len(lines) == 1, proc.stderr
         assert "one directory holds one root seed" in lines[0] and "--force" not in lines[0]
     assert snapshot(out) == before
+
+
+def test_a_second_run_into_a_directory_being_written_is_refused_and_a_killed_writer_leaves_no_lock(tiny, tmp_path):
+    """While a run holds a results directory's lock (store.directory_lock), another run into it is refused with one
+    line and changes nothing; the lock dies with its process however it dies (kill -9), and a run that ends leaves no
+    lock file behind."""
+    path, out = copied(tiny, tmp_path)
+    holder = subprocess.Popen([sys.executable, "-c", (
+        "import sys, time; from pathlib import Path; from tanbench import store\n"
+        "with store.directory_lock(Path(sys.argv[1])):\n"
+        "    print('held', flush=True); time.sleep(600)\n"), str(out)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        before = snapshot(out)
+        refused = cli("run", path, "--out", out, "--workers", 1, "-q")
+        lines = [line for line in refused.stderr.splitlines() if line.strip()]
+        assert refused.returncode == 2 and len(lines) == 1, refused.stderr
+        assert f"{out} is being written by another tanbench run (pid {holder.pid})" in lines[0]
+        assert snapshot(out) == before
+    finally:
+        holder.kill()
+        holder.wait()
+    assert (out / store.LOCK_FILE).exists()  # killed: the file stays, the lock does not
+    again = cli("run", path, "--out", out, "--workers", 1, "-q")
+    assert again.returncode == 0, again.stderr
+    assert not (out / store.LOCK_FILE).exists()
+    assert_same_runs(results.load(out), results.load(tiny[1]))

@@ -193,7 +193,8 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
     created = not out.exists()
     store.check_writable(out)
     try:
-        return _run_into(sweep, out, workers, scheduler, series, force, progress, echo, add, note)
+        with store.directory_lock(out):  # one writer at a time
+            return _run_into(sweep, out, workers, scheduler, series, force, progress, echo, add, note)
     except TanbenchError:
         if created:  # refused before anything was stored (e.g. a scheduler that does not answer): leave no trace
             try:
