@@ -43,12 +43,17 @@ SIMULATION_S = 0.022  # one run's vehicle data (1190 s at 100 Hz; the world's ra
 # tight 0.86 (0.829, 0.883), loose alone 0.81 (1 pair). pmf, mpf, ekf and tercom: measured again on 3 Dec 2026
 # (seventh session, docs/speed.md) in one process on a fresh cache after the simulation, in this order, without
 # the tight family: 15.32, 11.68, 7.78 and 4.67 s of thread CPU on that VM, over its speed factor 0.481.
-COMPILE_SHARED_S = 5.4
-COMPILE_FAMILY_S = {"tight": 41.6, "loose": 23.5, "pmf": 31.8, "mpf": 24.3, "ekf": 16.2, "tercom": 9.7}
+# The simulation, tight and loose measured again on 5 Dec 2026 (nineteenth session, docs/speed.md; the kernels had
+# grown since: the tight loop's tempering and adaptive-count paths, loose-dvl's gates): one process on an empty
+# cache, thread CPU over the machine's speed factor (0.48-0.50), /work/notes/s19/compile_seq.py: the simulation 7.6,
+# 7.4, 7.0; tight 64.1, 62.4; loose after tight 29.7, 29.5; loose alone 64.4 (after the simulation).
+COMPILE_SHARED_S = 7.3
+COMPILE_FAMILY_S = {"tight": 63.3, "loose": 29.6, "pmf": 31.8, "mpf": 24.3, "ekf": 16.2, "tercom": 9.7}
 # a family compiled in a process without the family whose kernels it reuses (a side-by-side helper):
-# loose-dvl after the simulation only, on a fresh cache
+# loose-dvl after the simulation only, on a fresh cache; what it shares with that family is the difference
+# (shared_compile_s), which side-by-side processes split between them when they are staged (compile_stages)
 COMPILE_REUSES = {"loose": "tight"}
-COMPILE_ALONE_S = {"loose": 45.0}
+COMPILE_ALONE_S = {"loose": 64.4}
 COMPILE_OTHER_FAMILY_S = 30.0  # a built-in family not measured yet
 # another variant of a family's kernels (:func:`kernel_variant`) compiled after one of them (its callees
 # then load from the cache): the jitted loop once more, COMPILE_LOOP_S (also the default variant compiled
@@ -212,30 +217,53 @@ def family_compile_s(family: str) -> float:
     return COMPILE_FAMILY_S.get(family, COMPILE_OTHER_FAMILY_S)
 
 
-def group_compile_s(families) -> float:
+def shared_compile_s(family: str) -> float:
+    """Seconds of the kernels ``family`` shares with the family whose kernels it reuses (``COMPILE_REUSES``):
+    what it costs alone beyond what it costs after that family."""
+    return COMPILE_ALONE_S[family] - family_compile_s(family)
+
+
+def group_compile_s(families, staged_apart=frozenset()) -> float:
     """Seconds one process takes to compile ``families`` after the simulation: each family's
     ``COMPILE_FAMILY_S``, or its ``COMPILE_ALONE_S`` where the family whose kernels it reuses is not
-    in the group (it then compiles them itself)."""
-    families = set(families)
-    return sum(COMPILE_ALONE_S[f] if f in COMPILE_ALONE_S and COMPILE_REUSES[f] not in families
-               else family_compile_s(f) for f in families)
+    in the group (it then compiles them itself). ``staged_apart``: the families other processes compile
+    side by side with this one, staged (``runner/compile_stages.py``: each process first compiles its share of
+    the kernels their families share, and loads the rest): half of what a family here shares with one of
+    them is compiled there."""
+    families, total = set(families), 0.0
+    for f in families:
+        alone = f in COMPILE_ALONE_S and COMPILE_REUSES[f] not in families
+        total += COMPILE_ALONE_S[f] if alone else family_compile_s(f)
+        if alone and COMPILE_REUSES[f] in staged_apart:
+            total -= shared_compile_s(f) / 2
+        total -= sum(shared_compile_s(g) / 2 for g in staged_apart if g in COMPILE_REUSES and COMPILE_REUSES[g] == f)
+    return total
 
 
 def compile_seconds(methods, cold=None, processes: int = 1) -> float:
     """Seconds numba takes to compile the kernels of ``methods`` (kernel names, :func:`cell_kernels`;
     the cold ones, :func:`tanbench.kernel_cache.cold_methods`, unless ``cold`` names them) on this
     machine idle, with ``processes`` processes compiling groups of families side by side
-    (:func:`compile_groups`): the longest group's families (:func:`group_compile_s`) plus the shared
+    (:func:`compile_groups`): the longest group's families (:func:`group_compile_s`, less what staged processes
+    compile for one another, :func:`tanbench.runner.compile_stages.shares_for`) plus the shared
     simulation kernels (every process compiles those), plus starting the helpers and loading their
     kernels afterwards; then, in the parent, the families' other variants (:func:`variant_compile_s`;
     with no family to compile, after loading the cached ones, :data:`COMPILE_LOAD_S`).
     One process: the sum of all."""
+    from tanbench.runner.compile_stages import shares_for
+
     groups = compile_groups(methods, processes, cold)
     variants = variant_compile_s(methods, cold)
     if not groups:  # only variants: the parent loads their families first
         return COMPILE_LOAD_S + variants if variants else 0.0
-    longest = max(group_compile_s({family_of(m) for m in g}) for g in groups)
-    return COMPILE_SHARED_S + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0) + variants
+    families = [{family_of(m) for m in g} for g in groups]
+    # the families whose processes compile a share of the recorded table first (none in one process)
+    shares = [share for share in shares_for(groups) if share] if len(groups) > 1 else []
+    staged = {f for fams, share in zip(families, shares_for(groups)) if share and shares for f in fams}
+    longest = max(group_compile_s(fams, frozenset(staged - fams)) for fams in families)
+    # the simulation's kernels are in the staged shares too: split between the staged processes
+    simulation = COMPILE_SHARED_S / len(shares) if shares else COMPILE_SHARED_S
+    return simulation + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0) + variants
 
 
 def machine_compile_seconds(methods, cold=None, processes: int = 1) -> float:
