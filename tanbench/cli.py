@@ -433,7 +433,7 @@ def _write_mission_log(scenario, vehicle, seed: int, log: Path, lonlat: bool, lo
     mission = simulated_log(scenario, vehicle, seed, lonlat)
     files = write_log(log, mission, log_format)
     write_map(navigation_map(scenario.terrain, scenario.map_resolution_m), log / MAP_FILE)
-    store.write_text(settings_text(scenario), log / SETTINGS_FILE)
+    store.write_text(settings_text(scenario, lonlat), log / SETTINGS_FILE)
     typer.echo(f"wrote the mission log {log} ({len(files) - 1} tables, {'lon/lat' if lonlat else 'map-frame'} "
                f"positions), its navigation map {log / MAP_FILE} and method settings {log / SETTINGS_FILE}")
 
@@ -544,6 +544,47 @@ def terrain_stats(
         typer.echo("A flat track (small depth std and slope) is not an error, but TAN has little to work with.")
         for line in seams:
             typer.echo(line)
+
+
+@terrain_app.command("info", help="A map's nodes, spacing, extent in tanbench's frame (where a trajectory's "
+                     "start_en_m or centre_en_m goes) and depths, as a sweep's terrain reads it."
+                     + EXAMPLE.format("tanbench terrain info '../shared/data/monterey/MontereyBay.R_*.tif'"))
+def terrain_info(
+    path: Optional[str] = typer.Argument(None, help="A map file or a quoted glob of tiles (terrain kind file)."),
+    sweep_file: Optional[Path] = typer.Option(None, "--sweep", help="The maps of this sweep's worlds instead."),
+    rows: str = typer.Option("auto", "--rows", help="terrain.rows for a map file: auto, south_to_north or "
+                                                   "north_to_south."),
+    crs: Optional[str] = typer.Option(None, "--crs", help="terrain.crs for a map file [default: from the file]."),
+):
+    import numpy as np
+    from pydantic import ValidationError
+
+    from tanbench.config import TerrainSpec, format_validation_error
+    from tanbench.terrain import truth_map
+
+    if (path is None) == (sweep_file is None):
+        raise TanbenchError("give a map file (or a glob of tiles) or --sweep FILE, one of them")
+    if sweep_file is not None:
+        from tanbench.sweep import load_sweep
+
+        specs = list({c.scenario.terrain.model_dump_json(): c.scenario.terrain
+                      for c in load_sweep(sweep_file).cells}.values())
+    else:
+        try:
+            specs = [TerrainSpec(kind="file", path=path, rows=rows, crs=crs)]
+        except ValidationError as exc:
+            raise TanbenchError(f"terrain: {format_validation_error(exc)}") from None
+    for spec in specs:
+        m = truth_map(spec)
+        ny, nx = m.shape
+        finite = m.z[np.isfinite(m.z)]
+        depths = (f"depth {finite.min():.1f} .. {finite.max():.1f} m (mean {finite.mean():.1f})" if finite.size
+                  else "no depths")
+        frame = m.meta.get("crs", "metric")
+        typer.echo(f"{m.name or spec.kind}: {nx} x {ny} nodes at {m.res_e:.2f} x {m.res_n:.2f} m; "
+                   f"E {m.e0:.1f} .. {m.e_max:.1f} m, N {m.n0:.1f} .. {m.n_max:.1f} m; {depths}; "
+                   f"{m.z.size - finite.size} holes; frame {frame}")
+    typer.echo("E and N are the frame of a trajectory's start_en_m and centre_en_m (docs/maps.md).")
 
 
 @terrain_app.command("suitability", help="Per-node TAN suitability of a map (predicted position std after N "

@@ -362,6 +362,12 @@ CASES = [
                          "off_map_points,map_rms_10m,map_rms_20m,map_rms_30m")),
     case("dask-scheduler-not-answering", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "tcp://127.0.0.1:1"],
          BASE, "cannot reach the Dask scheduler at tcp://127.0.0.1:1", hang_s=120),
+    # terrain info
+    case("terrain-info-needs-a-map-or-a-sweep", ["terrain", "info"], None,
+         "give a map file (or a glob of tiles) or --sweep FILE, one of them"),
+    case("terrain-info-missing-map", ["terrain", "info", "{tmp}/nothing.tif"], None, "nothing.tif: file not found"),
+    case("terrain-info-of-a-sweep", ["terrain", "info", "--sweep", "configs/quick.yaml"], None,
+         "synthetic:paper:seed1: 1201 x 481 nodes at 2.50 x 2.50 m; E 0.0 .. 3000.0 m, N 0.0 .. 1200.0 m", code=0),
     case("dask-scheduler-malformed", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "bogus"],
          BASE, "--scheduler bogus: not a Dask scheduler address", "give HOST:PORT", absent=("within",)),
 ]

@@ -215,3 +215,17 @@ def test_the_cli_refuses_with_one_line_and_exit_2(base, tmp_path):
 def test_replay_help_is_plain_and_points_to_the_format():
     proc = cli("replay", "--help")
     assert proc.returncode == 0 and "docs/missions.md" in proc.stdout and "<bool>" not in proc.stdout
+
+
+def test_a_lonlat_log_s_settings_say_to_replay_it_on_its_georeferenced_map():
+    """``simulate --log --lonlat``: map.npz is in metres with no geographic reference, so settings.yaml's first line
+    names the map the run was simulated on for the replay; a map-frame log's names map.npz."""
+    from tanbench.config import Scenario
+    from tanbench.missions.simulated import settings_text
+
+    sc = Scenario(terrain={"kind": "file", "path": "../shared/data/monterey/MontereyBay.R_*.tif"}, area="custom",
+                  trajectory={"kind": "survey", "centre_en_m": [900.0, 1100.0]})
+    first = settings_text(sc, lonlat=True).splitlines()[0]
+    assert "lon/lat" in first and "--map '../shared/data/monterey/MontereyBay.R_*.tif'" in first
+    assert "--map LOG/map.npz" in settings_text(sc).splitlines()[0]
+    assert yaml.safe_load(settings_text(sc, lonlat=True)) == yaml.safe_load(settings_text(sc))

@@ -107,12 +107,21 @@ def write_map(nmap, path: Path) -> Path:
     return path
 
 
-def settings_text(scenario) -> str:
-    """``tanbench replay --settings`` YAML with the method settings of ``scenario`` (what reproduces its run)."""
+def settings_text(scenario, lonlat: bool = False) -> str:
+    """``tanbench replay --settings`` YAML with the method settings of ``scenario`` (what reproduces its run); its
+    header says how to replay it: on ``LOG/map.npz``, or, for a log in lon/lat (``lonlat``), on the georeferenced map
+    the run was simulated on (``map.npz`` is in metres, with no geographic reference)."""
     import yaml
 
     d = scenario.normalized()
     data = {"particles": d["particles"], "sampling_time_s": d["sampling_time_s"], "filter": d["filter"],
             "method_options": d["method_options"], "map": {"map_error_m": d["terrain"]["map_error_m"]}}
-    return ("# method settings of the simulated run: `tanbench replay LOG --map LOG/map.npz --settings THIS`\n"
-            + yaml.safe_dump(data, sort_keys=False))
+    if lonlat:
+        path = scenario.terrain.path
+        where = " ".join(path) if isinstance(path, list) else str(path)
+        header = (f"# method settings of the simulated run; its positions are lon/lat, so replay it on the georeferenced "
+                  f"map it was simulated on: `tanbench replay LOG --map '{where}' --settings THIS` (LOG/map.npz is in "
+                  f"metres, with no geographic reference)\n")
+    else:
+        header = "# method settings of the simulated run: `tanbench replay LOG --map LOG/map.npz --settings THIS`\n"
+    return header + yaml.safe_dump(data, sort_keys=False)

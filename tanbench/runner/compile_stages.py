@@ -29,9 +29,9 @@ import time
 from functools import lru_cache
 from pathlib import Path
 
-from tanbench.runner.plan import family_of, kernel_variant
+from tanbench.runner.plan import STAGES_TABLE as TABLE
+from tanbench.runner.plan import family_of, kernel_variant, load_stages_table, staged_groups
 
-TABLE = Path(__file__).with_name("compile_stages.json")
 # the methods whose cold warm-ups are recorded, per family: configs/quick.yaml's and the default sweep's
 RECORDED = {"tight": ("tight-dvl", "tight-sbe"), "loose": ("loose-dvl",)}
 
@@ -92,11 +92,8 @@ def _resolve(module: str, qualname: str):
 
 @lru_cache(maxsize=1)
 def load_table() -> dict:
-    """The recorded table (empty if there is none)."""
-    try:
-        return json.loads(TABLE.read_text())
-    except (OSError, ValueError):
-        return {}
+    """The recorded table (empty if there is none): :func:`tanbench.runner.plan.load_stages_table`."""
+    return load_stages_table()
 
 
 def shares_for(groups, scenario=None) -> list[list]:
@@ -108,9 +105,9 @@ def shares_for(groups, scenario=None) -> list[list]:
     variant's argument types."""
     table = load_table().get("shares", {})
     shares = [[] for _ in groups]
-    group_of = {family_of(m): i for i, g in enumerate(groups) for m in g}  # compile_groups keeps a family whole
-    if not table or any(f not in group_of for f in table) or len({group_of[f] for f in table}) < len(table):
+    if not staged_groups(groups):
         return shares
+    group_of = {family_of(m): i for i, g in enumerate(groups) for m in g}  # compile_groups keeps a family whole
     if scenario is not None and any(kernel_variant(m, scenario) for g in groups for m in g
                                     if family_of(m) in RECORDED):
         return shares

@@ -217,6 +217,28 @@ def family_compile_s(family: str) -> float:
     return COMPILE_FAMILY_S.get(family, COMPILE_OTHER_FAMILY_S)
 
 
+# runner/compile_stages.py's table: the kernels side-by-side compile processes share, split between the families
+STAGES_TABLE = Path(__file__).with_name("compile_stages.json")
+
+
+def load_stages_table() -> dict:
+    """The recorded table of ``runner/compile_stages.py`` (empty if there is none)."""
+    try:
+        return json.loads(STAGES_TABLE.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def staged_groups(groups) -> bool:
+    """Whether side-by-side compile ``groups`` (lists of method names, :func:`compile_groups`) are staged by the
+    table: more than one group, and every family of the table in a group of its own (``compile_stages.shares_for``
+    then gives each its share; it also asks for every method's default kernel variant)."""
+    table = load_stages_table().get("shares", {})
+    group_of = {family_of(m): i for i, g in enumerate(groups) for m in g}  # compile_groups keeps a family whole
+    return (len(groups) > 1 and bool(table) and all(f in group_of for f in table)
+            and len({group_of[f] for f in table}) == len(table))
+
+
 def shared_compile_s(family: str) -> float:
     """Seconds of the kernels ``family`` shares with the family whose kernels it reuses (``COMPILE_REUSES``):
     what it costs alone beyond what it costs after that family."""
@@ -250,19 +272,17 @@ def compile_seconds(methods, cold=None, processes: int = 1) -> float:
     kernels afterwards; then, in the parent, the families' other variants (:func:`variant_compile_s`;
     with no family to compile, after loading the cached ones, :data:`COMPILE_LOAD_S`).
     One process: the sum of all."""
-    from tanbench.runner.compile_stages import shares_for
-
     groups = compile_groups(methods, processes, cold)
     variants = variant_compile_s(methods, cold)
     if not groups:  # only variants: the parent loads their families first
         return COMPILE_LOAD_S + variants if variants else 0.0
     families = [{family_of(m) for m in g} for g in groups]
     # the families whose processes compile a share of the recorded table first (none in one process)
-    shares = [share for share in shares_for(groups) if share] if len(groups) > 1 else []
-    staged = {f for fams, share in zip(families, shares_for(groups)) if share and shares for f in fams}
+    # the families whose processes first compile a share of runner/compile_stages.py's table (none in one process)
+    staged = set(load_stages_table().get("shares", {})) if staged_groups(groups) else set()
     longest = max(group_compile_s(fams, frozenset(staged - fams)) for fams in families)
     # the simulation's kernels are in the staged shares too: split between the staged processes
-    simulation = COMPILE_SHARED_S / len(shares) if shares else COMPILE_SHARED_S
+    simulation = COMPILE_SHARED_S / len(staged) if staged else COMPILE_SHARED_S
     return simulation + longest + (COMPILE_JOIN_S if len(groups) > 1 else 0.0) + variants
 
 
