@@ -574,16 +574,22 @@ def terrain_info(
             specs = [TerrainSpec(kind="file", path=path, rows=rows, crs=crs)]
         except ValidationError as exc:
             raise TanbenchError(f"terrain: {format_validation_error(exc)}") from None
+    frames = {"local": "local (lon/lat projected about the map's origin)", "metric": "metric (metres)"}
     for spec in specs:
-        m = truth_map(spec)
+        try:
+            m = truth_map(spec)
+        except TanbenchError as exc:
+            if sweep_file is not None:
+                raise
+            raise TanbenchError(f"{exc} (terrain info takes --rows and --crs; for other terrain options write them "
+                                f"in a sweep's terrain and give --sweep)") from None
         ny, nx = m.shape
         finite = m.z[np.isfinite(m.z)]
-        depths = (f"depth {finite.min():.1f} .. {finite.max():.1f} m (mean {finite.mean():.1f})" if finite.size
-                  else "no depths")
         frame = m.meta.get("crs", "metric")
         typer.echo(f"{m.name or spec.kind}: {nx} x {ny} nodes at {m.res_e:.2f} x {m.res_n:.2f} m; "
-                   f"E {m.e0:.1f} .. {m.e_max:.1f} m, N {m.n0:.1f} .. {m.n_max:.1f} m; {depths}; "
-                   f"{m.z.size - finite.size} holes; frame {frame}")
+                   f"E {m.e0:.1f} .. {m.e_max:.1f} m, N {m.n0:.1f} .. {m.n_max:.1f} m; elevation (up positive) "
+                   f"{finite.min():.1f} .. {finite.max():.1f} m, mean {finite.mean():.1f}; "
+                   f"{m.z.size - finite.size} holes; frame {frames.get(frame, frame)}")
     typer.echo("E and N are the frame of a trajectory's start_en_m and centre_en_m (docs/maps.md).")
 
 

@@ -471,7 +471,10 @@ def directory_lock(out: Path):
         return
     path = out / LOCK_FILE
     while True:
-        fh = open(path, "a+")
+        try:
+            fh = open(path, "a+")
+        except FileNotFoundError:  # out was removed meanwhile (a refused run that had created it)
+            raise TanbenchError(f"{out} was removed while this run started; run it again") from None
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

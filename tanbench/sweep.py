@@ -288,6 +288,8 @@ def _scenario(data: dict, label: str, where: str) -> Scenario:
     try:
         return Scenario(**data)
     except ValidationError as exc:
+        if where.endswith("."):  # a key path: every problem's key under it
+            raise TanbenchError(f"{label}: {format_validation_error(exc, where)}") from None
         raise TanbenchError(f"{label}: {where}{format_validation_error(exc)}") from None
 
 

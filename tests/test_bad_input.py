@@ -135,6 +135,11 @@ def read_only_figures(tmp):
     return values
 
 
+def no_directory(path):
+    """A refused run leaves no directory it created (snapshot() lists files only)."""
+    assert not path.exists(), path
+
+
 def regular_file(tmp):
     (tmp / "a-file").write_text("keep me")
     return {"out": str(tmp / "a-file")}
@@ -199,8 +204,8 @@ CASES = [
     case("seven-problems-name-five", ["validate", "{sweep}"],
          sweep(scenario__particles=0, scenario__duration_s=-1, scenario__noise_m=-1, scenario__map_resolution_m=0,
                scenario__sampling_time_s=0, scenario__colour="red", scenario__shade="blue"),
-         "scenario.map_resolution_m: Input should be greater than 0 (got 0); noise_m: ",
-         "duration_s: Input should be greater than 0 (got -1); and 2 more problems"),
+         "scenario.map_resolution_m: Input should be greater than 0 (got 0); scenario.noise_m: ",
+         "scenario.duration_s: Input should be greater than 0 (got -1); and 2 more problems"),
     case("zero-map-resolution", ["validate", "{sweep}"], sweep(scenario__map_resolution_m=0),
          "scenario.map_resolution_m: Input should be greater than 0"),
     case("negative-map-resolution-in-a-table", ["validate", "{sweep}"],
@@ -226,7 +231,7 @@ CASES = [
          "maps.map_resolution_m: needs at least one value"),
     # map resolution against the terrain
     case("map-finer-than-synthetic-truth", ["validate", "{sweep}"], sweep(scenario__map_resolution_m=1),
-         "scenario.map_resolution_m (1) is finer than the truth grid (2.5 m)"),
+         "scenario: map_resolution_m (1) is finer than the truth grid (2.5 m)"),
     case("map-finer-than-file-grid", ["validate", "{sweep}"], file_sweep(scenario__map_resolution_m=2),
          "bad.yaml: cell", "map resolution 2.0 m is finer than the truth grid (5 m)"),
     case("map-coarser-than-extent", ["validate", "{sweep}"], sweep(scenario__map_resolution_m=5000),
@@ -302,7 +307,7 @@ CASES = [
          "tables.t: map_resolution_m: must be a finite number, not nan"),
     # run lengths
     case("duration-shorter-than-a-ping", ["validate", "{sweep}"], sweep(scenario__duration_s=0.001),
-         "scenario.duration_s (0.001 s) is shorter than one sonar ping (1 s"),
+         "scenario: duration_s (0.001 s) is shorter than one sonar ping (1 s"),
     case("sampling-time-longer-than-the-run", ["validate", "{sweep}"],
          sweep(scenario__duration_s=None, scenario__sampling_time_s=100000, scenario__map_resolution_m=20),
          "bad.yaml: cell", "sampling_time_s (100000 s) is longer than the run (1190 s)"),
@@ -361,13 +366,15 @@ CASES = [
          then=csv_header("area,terrain,points,depth_mean_m,depth_std_m,depth_min_m,depth_max_m,mean_slope_deg,"
                          "off_map_points,map_rms_10m,map_rms_20m,map_rms_30m")),
     case("dask-scheduler-not-answering", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "tcp://127.0.0.1:1"],
-         BASE, "cannot reach the Dask scheduler at tcp://127.0.0.1:1", hang_s=120),
+         BASE, "cannot reach the Dask scheduler at tcp://127.0.0.1:1", hang_s=120,
+         then=lambda tmp, proc: no_directory(tmp / "out")),
     # terrain info
     case("terrain-info-needs-a-map-or-a-sweep", ["terrain", "info"], None,
          "give a map file (or a glob of tiles) or --sweep FILE, one of them"),
     case("terrain-info-missing-map", ["terrain", "info", "{tmp}/nothing.tif"], None, "nothing.tif: file not found"),
     case("terrain-info-of-a-sweep", ["terrain", "info", "--sweep", "configs/quick.yaml"], None,
-         "synthetic:paper:seed1: 1201 x 481 nodes at 2.50 x 2.50 m; E 0.0 .. 3000.0 m, N 0.0 .. 1200.0 m", code=0),
+         "synthetic:paper:seed1: 1201 x 481 nodes at 2.50 x 2.50 m; E 0.0 .. 3000.0 m, N 0.0 .. 1200.0 m; "
+         "elevation (up positive) -120.9 .. 0.0 m", code=0),
     case("dask-scheduler-malformed", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "bogus"],
          BASE, "--scheduler bogus: not a Dask scheduler address", "give HOST:PORT", absent=("within",)),
 ]

@@ -503,3 +503,20 @@ def test_a_cold_staged_warm_up_compiles_each_jitted_kernel_once(tmp_path):
     assert counts["tanbench.filters.likelihood.loglik_tight_pass"] == 1  # compiled here, not loaded
     assert {k: n for k, n in counts.items() if n > 1 and k not in THIN_FILL_WRAPPERS | PER_FAMILY_SIGNATURES} == {}
     assert all(counts[k] == 2 for k in PER_FAMILY_SIGNATURES)
+
+
+def test_a_sweep_of_other_kernel_variants_is_not_charged_a_staged_compile():
+    """runner/compile_stages.py stages only the default kernel variants (the table's argument types):
+    configs/ci-numpy.yaml (numpy's random numbers) compiles side by side unstaged, and the plan charges it so:
+    loose alone, the whole simulation; configs/quick.yaml's default variants are staged and cost less."""
+    numpy_kernels = planning.make_plan(load_sweep(ROOT / "configs" / "ci-numpy.yaml"), Path("/nonexistent"),
+                                       workers=2).kernels()
+    default_kernels = planning.make_plan(load_sweep(ROOT / "configs" / "quick.yaml"), Path("/nonexistent"),
+                                         workers=2).kernels()
+    groups = planning.compile_groups(numpy_kernels, 2, numpy_kernels)
+    assert len(groups) == 2 and not planning.staged_groups(groups, numpy_kernels)
+    assert planning.staged_groups(planning.compile_groups(default_kernels, 2, default_kernels), default_kernels)
+    unstaged = planning.compile_seconds(numpy_kernels, numpy_kernels, processes=2)
+    assert unstaged == pytest.approx(planning.COMPILE_SHARED_S + planning.COMPILE_JOIN_S + max(
+        planning.COMPILE_FAMILY_S["tight"], planning.COMPILE_ALONE_S["loose"]))
+    assert planning.compile_seconds(default_kernels, default_kernels, processes=2) < unstaged

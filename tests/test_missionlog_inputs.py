@@ -227,5 +227,24 @@ def test_a_lonlat_log_s_settings_say_to_replay_it_on_its_georeferenced_map():
                   trajectory={"kind": "survey", "centre_en_m": [900.0, 1100.0]})
     first = settings_text(sc, lonlat=True).splitlines()[0]
     assert "lon/lat" in first and "--map '../shared/data/monterey/MontereyBay.R_*.tif'" in first
+    assert "not the simulated run's" in first
     assert "--map LOG/map.npz" in settings_text(sc).splitlines()[0]
     assert yaml.safe_load(settings_text(sc, lonlat=True)) == yaml.safe_load(settings_text(sc))
+
+
+def test_simulate_refuses_a_log_path_that_is_a_file_before_simulating(tmp_path, monkeypatch):
+    """``simulate --log FILE``: refused before the run is simulated (the simulation is made to fail here, so the
+    refusal must come first)."""
+    from typer.testing import CliRunner
+
+    import tanbench.simulation
+    from tanbench.cli import app
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("simulated before the log directory was checked")
+
+    monkeypatch.setattr(tanbench.simulation, "simulate_vehicle", never)
+    (tmp_path / "a-file").write_text("keep me")
+    result = CliRunner().invoke(app, ["simulate", "--area", "A", "--duration", "20", "--log", str(tmp_path / "a-file")])
+    assert result.exit_code != 0 and "exists and is not a directory" in str(result.output) + str(result.exception)
+    assert (tmp_path / "a-file").read_text() == "keep me"

@@ -465,3 +465,15 @@ def test_a_second_run_into_a_directory_being_written_is_refused_and_a_killed_wri
     assert again.returncode == 0, again.stderr
     assert not (out / store.LOCK_FILE).exists()
     assert_same_runs(results.load(out), results.load(tiny[1]))
+
+
+def test_with_series_none_an_unreadable_summary_is_left_as_it_is_and_still_named(tiny, tmp_path):
+    """``run --series none`` rebuilds no summary, so it leaves an unreadable one where it is (no note that it would
+    be rebuilt), and ``tables`` goes on naming it."""
+    path, out = copied(tiny, tmp_path)
+    summary = out / "series" / "summary.parquet"
+    summary.write_bytes(b"junk")
+    again = cli("run", path, "--out", out, "--workers", 1, "-q", "--series", "none")
+    assert again.returncode == 0 and "summary.parquet cannot be read" not in again.stderr, again.stderr
+    assert summary.read_bytes() == b"junk" and not summary.with_name(".summary.parquet.damaged").exists()
+    assert "the series summary cannot be read" in cli("tables", out).stderr

@@ -120,7 +120,8 @@ def sweep_path(npz: Path) -> str:
 def sweep(name: str, seed: int, npz: Path | str, centre: tuple[float, float]) -> dict:
     return {
         "name": name,
-        "description": f"held-out real relief {name} (docs/filters.md 8): tight-dvl, tight-sbe, loose-dvl",
+        "description": f"held-out real relief {name} (docs/filters.md {25 if int(name[1:]) >= 73 else 8}): tight-dvl, "
+                       f"tight-sbe, loose-dvl",
         "seed": seed, "runs": 10, "methods": ["tight-dvl", "tight-sbe", "loose-dvl"],
         "scenario": {
             "terrain": {"kind": "file", "path": str(npz), "resample_m": 8, "depth_range_m": [-180, -60]},

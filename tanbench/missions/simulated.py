@@ -117,11 +117,15 @@ def settings_text(scenario, lonlat: bool = False) -> str:
     data = {"particles": d["particles"], "sampling_time_s": d["sampling_time_s"], "filter": d["filter"],
             "method_options": d["method_options"], "map": {"map_error_m": d["terrain"]["map_error_m"]}}
     if lonlat:
+        import shlex
+
         path = scenario.terrain.path
-        where = " ".join(path) if isinstance(path, list) else str(path)
-        header = (f"# method settings of the simulated run; its positions are lon/lat, so replay it on the georeferenced "
-                  f"map it was simulated on: `tanbench replay LOG --map '{where}' --settings THIS` (LOG/map.npz is in "
-                  f"metres, with no geographic reference)\n")
+        where = (shlex.quote(str(path)) if not isinstance(path, list)
+                 else "FILE (one of " + ", ".join(str(p) for p in path) + ", or a glob of them)")
+        header = (f"# method settings of the simulated run; its positions are lon/lat and LOG/map.npz is in metres with "
+                  f"no geographic reference, so replay it on the georeferenced map it was simulated on: `tanbench replay "
+                  f"LOG --map {where} --settings THIS`; that replay's navigation map is the file as read, not the "
+                  f"run's (LOG/map.npz), so its results are not the simulated run's\n")
     else:
         header = "# method settings of the simulated run: `tanbench replay LOG --map LOG/map.npz --settings THIS`\n"
     return header + yaml.safe_dump(data, sort_keys=False)

@@ -26,7 +26,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from functools import lru_cache
 from pathlib import Path
 
 from tanbench.runner.plan import STAGES_TABLE as TABLE
@@ -90,7 +89,6 @@ def _resolve(module: str, qualname: str):
 
 # --- using the table ---------------------------------------------------------------------------------
 
-@lru_cache(maxsize=1)
 def load_table() -> dict:
     """The recorded table (empty if there is none): :func:`tanbench.runner.plan.load_stages_table`."""
     return load_stages_table()
@@ -219,7 +217,7 @@ def write_table(table: dict, path: Path = TABLE) -> None:
         lines += [f"   {json.dumps(e)}" + ("," if j < len(entries) - 1 else "") for j, e in enumerate(entries)]
         lines.append("  ]" + ("," if i < len(table["shares"]) - 1 else ""))
     path.write_text("\n".join(lines + [" }", "}"]) + "\n")
-    load_table.cache_clear()
+    load_stages_table.cache_clear()
 
 
 if __name__ == "__main__":

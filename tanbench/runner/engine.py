@@ -207,7 +207,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int | None = None, scheduler: st
 def _run_into(sweep: Sweep, out: Path, workers, scheduler, series, force, progress, echo, add, note) -> RunReport:
     """:func:`run_sweep` once ``out`` is checked and writable."""
     store.remove_stale_temporaries(out)
-    state = ResumeState.read(sweep, out)
+    state = ResumeState.read(sweep, out, series)
     for line in state.check(force=force, add=add):
         note(line)
     state.set_aside_damaged()
@@ -239,7 +239,8 @@ def log_session(out: Path, report: RunReport, plan: Plan, scheduler) -> None:
         "started": (_dt.datetime.now(_dt.timezone.utc) - _dt.timedelta(seconds=report.wall_s)).isoformat(
             timespec="seconds"),
         "wall_s": round(report.wall_s, 2), "tasks_run": report.finished, "tasks_skipped": report.skipped,
-        "failed_rows": report.failed_rows, "interrupted": report.interrupted, "workers": plan.workers,
+        "failed_rows": report.failed_rows, "interrupted": report.interrupted, "runs": plan.sweep.spec.runs,
+        "workers": plan.workers,
         "scheduler": scheduler or "local", "cpu_count": os.cpu_count(), "tanbench_version": __version__,
     }
     try:

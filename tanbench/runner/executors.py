@@ -356,6 +356,9 @@ def open_executor(workers: int, scheduler: str | None, truth_maps: dict | None =
                     pass
 
 
+NEEDS_DASK = "--scheduler needs Dask: pip install 'tanbench[dask]'"
+
+
 def check_scheduler_address(scheduler: str | None) -> None:
     """Refuse a ``--scheduler`` that is not an address a Dask client could connect to (nor ``local-dask``), before
     anything is created: a malformed address is a mistake to name, not a scheduler that did not answer."""
@@ -363,10 +366,15 @@ def check_scheduler_address(scheduler: str | None) -> None:
         return
     try:
         from distributed.comm.addressing import parse_address, parse_host_port
+        from distributed.comm.registry import backends
     except ImportError:
-        raise TanbenchError("--scheduler needs Dask: pip install 'tanbench[dask]'") from None
+        raise TanbenchError(NEEDS_DASK) from None
     try:
+        if scheduler != scheduler.strip():
+            raise ValueError("spaces around it")
         protocol, location = parse_address(scheduler)
+        if protocol not in backends:
+            raise ValueError(f"unknown protocol {protocol!r}; Dask knows {', '.join(sorted(backends))}")
         if protocol in ("tcp", "tls"):
             parse_host_port(location)
     except ValueError as exc:
@@ -379,7 +387,7 @@ def _dask_client(workers: int, scheduler: str):
     try:
         from distributed import Client, LocalCluster
     except ImportError:
-        raise TanbenchError("--scheduler needs Dask: pip install 'tanbench[dask]'") from None
+        raise TanbenchError(NEEDS_DASK) from None
     if scheduler == "local-dask":
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=None, env=SINGLE_THREAD_ENV)

@@ -36,15 +36,16 @@ SIMULATION_S = 0.022  # one run's vehicle data (1190 s at 100 Hz; the world's ra
 # errors), then each method family's kernels (a family: the methods named FAMILY-sensor, which run the same
 # kernels with the same types; the first, tight, includes the random numbers, resampling, propagation and
 # likelihood passes the later ones reuse). A sweep compiles only the families it names.
-# tight and loose: the values measured after issue 27's first compile cuts (3 Dec 2026, load 1.7-6:
+# tight and loose until 5 Dec 2026 (replaced below): the values measured after issue 27's first compile cuts (3 Dec 2026, load 1.7-6:
 # tight 54.0, loose after it 27.4, loose alone 55.7) times the ratio new/old of cold compiles of the code
 # before and after the rare variants were made lazy, old and new compiled side by side on a loaded machine
 # (3 Dec 2026, docs/speed.md "3 December, fifth session"): tight 0.77 (2 pairs: 0.768, 0.778), loose after
 # tight 0.86 (0.829, 0.883), loose alone 0.81 (1 pair). pmf, mpf, ekf and tercom: measured again on 3 Dec 2026
 # (seventh session, docs/speed.md) in one process on a fresh cache after the simulation, in this order, without
 # the tight family: 15.32, 11.68, 7.78 and 4.67 s of thread CPU on that VM, over its speed factor 0.481.
-# The simulation, tight and loose measured again on 5 Dec 2026 (nineteenth session, docs/speed.md; the kernels had
-# grown since: the tight loop's tempering and adaptive-count paths, loose-dvl's gates): one process on an empty
+# The simulation, tight and loose measured again on 5 Dec 2026 (nineteenth session, docs/speed.md; the likely cause of
+# the change, not measured apart: the tight loop's tempering and adaptive-count paths, loose-dvl's gates): one process
+# on an empty
 # cache, thread CPU over the machine's speed factor (0.48-0.50), /work/notes/s19/compile_seq.py: the simulation 7.6,
 # 7.4, 7.0; tight 64.1, 62.4; loose after tight 29.7, 29.5; loose alone 64.4 (after the simulation).
 COMPILE_SHARED_S = 7.3
@@ -221,21 +222,27 @@ def family_compile_s(family: str) -> float:
 STAGES_TABLE = Path(__file__).with_name("compile_stages.json")
 
 
+@functools.lru_cache(maxsize=1)
 def load_stages_table() -> dict:
-    """The recorded table of ``runner/compile_stages.py`` (empty if there is none)."""
+    """The recorded table of ``runner/compile_stages.py`` (empty if there is none; read once per process,
+    ``compile_stages.write_table`` clears it)."""
     try:
         return json.loads(STAGES_TABLE.read_text())
     except (OSError, ValueError):
         return {}
 
 
-def staged_groups(groups) -> bool:
+def staged_groups(groups, kernels=None) -> bool:
     """Whether side-by-side compile ``groups`` (lists of method names, :func:`compile_groups`) are staged by the
-    table: more than one group, and every family of the table in a group of its own (``compile_stages.shares_for``
-    then gives each its share; it also asks for every method's default kernel variant)."""
+    table: more than one group, every family of the table in a group of its own, and (given the compiled
+    ``kernels``, names with their variants, :func:`cell_kernels`) every kernel of the table's families in its default
+    variant, the one the table's argument types are of (``compile_stages.shares_for`` asks it of the cell it warms
+    up on)."""
     table = load_stages_table().get("shares", {})
     group_of = {family_of(m): i for i, g in enumerate(groups) for m in g}  # compile_groups keeps a family whole
-    return (len(groups) > 1 and bool(table) and all(f in group_of for f in table)
+    defaults = all(not kernel_cache.variant_of(k) for k in kernels or ()
+                   if family_of(kernel_cache.method_of(k)) in table)
+    return (len(groups) > 1 and bool(table) and defaults and all(f in group_of for f in table)
             and len({group_of[f] for f in table}) == len(table))
 
 
@@ -257,7 +264,7 @@ def group_compile_s(families, staged_apart=frozenset()) -> float:
         alone = f in COMPILE_ALONE_S and COMPILE_REUSES[f] not in families
         total += COMPILE_ALONE_S[f] if alone else family_compile_s(f)
         if alone and COMPILE_REUSES[f] in staged_apart:
-            total -= shared_compile_s(f) / 2
+            total -= shared_compile_s(f) / 2  # the two processes split what they share (about: the table balances)
         total -= sum(shared_compile_s(g) / 2 for g in staged_apart if g in COMPILE_REUSES and COMPILE_REUSES[g] == f)
     return total
 
@@ -277,9 +284,9 @@ def compile_seconds(methods, cold=None, processes: int = 1) -> float:
     if not groups:  # only variants: the parent loads their families first
         return COMPILE_LOAD_S + variants if variants else 0.0
     families = [{family_of(m) for m in g} for g in groups]
-    # the families whose processes compile a share of the recorded table first (none in one process)
     # the families whose processes first compile a share of runner/compile_stages.py's table (none in one process)
-    staged = set(load_stages_table().get("shares", {})) if staged_groups(groups) else set()
+    staged = set(load_stages_table().get("shares", {})) if staged_groups(groups, _cold_and_warm(methods, cold)[0]) \
+        else set()
     longest = max(group_compile_s(fams, frozenset(staged - fams)) for fams in families)
     # the simulation's kernels are in the staged shares too: split between the staged processes
     simulation = COMPILE_SHARED_S / len(staged) if staged else COMPILE_SHARED_S

@@ -88,7 +88,9 @@ class ResumeState:
     summary_damaged: bool = False  # the series summary cannot be read: every run needs its own series file
 
     @classmethod
-    def read(cls, sweep: Sweep, out: Path) -> "ResumeState":
+    def read(cls, sweep: Sweep, out: Path, series_mode: str = "summary") -> "ResumeState":
+        """``series_mode``: the run's ``--series``; with ``none`` an unreadable series summary is left as it is (nothing
+        rebuilds it; ``tables`` keeps naming it)."""
         terrain, codes = terrain_hashes(sweep), method_codes(sweep)
         if not (out / "runs").is_dir():
             return cls(sweep, out, _with_stale(pd.DataFrame(columns=store.RUN_INDEX_COLUMNS), ""), [], set(),
@@ -100,7 +102,7 @@ class ResumeState:
         ids = {c.cell_id for c in sweep.cells}
         rows = everything[everything["cell_id"].isin(ids)].reset_index(drop=True)
         series, damaged_series = store.series_runs(out, check=True)
-        summary = store.unreadable_summary(out)
+        summary = store.unreadable_summary(out) if series_mode != "none" else None
         damaged_summary = [(store.summary_file(out), summary)] if summary is not None else []
         state = cls(sweep, out, rows, damaged + damaged_series + damaged_summary, series, terrain, codes, owner,
                     owner_from, stored_seeds, {store.cell_of(p) for p, _ in damaged}, summary is not None)
@@ -237,9 +239,27 @@ def _owner(out: Path, rows: pd.DataFrame) -> tuple[str | None, str]:
         return None, "runs"
 
 
+def last_session_runs(out: Path) -> int | None:
+    """The runs per cell the last session of ``out`` was asked for (its ``--runs``, or its sweep file's), from
+    ``sessions.jsonl`` (``engine.log_session``); None where no session recorded it (results of older versions)."""
+    try:
+        lines = (out / "sessions.jsonl").read_text().splitlines()
+    except OSError:
+        return None
+    for line in reversed(lines):
+        try:
+            runs = json.loads(line).get("runs")
+        except (ValueError, AttributeError):
+            continue
+        if isinstance(runs, int) and runs > 0:
+            return runs
+    return None
+
+
 def incomplete_cells(sweep: Sweep, out: Path) -> tuple[dict[str, str], int]:
     """Per cell of ``sweep`` whose stored runs in ``out`` are not whole: what is missing; and the directory's run
-    count, the most runs any of the sweep's cells holds (the ``--runs`` it was run with).
+    count: the runs its last session was asked for (:func:`last_session_runs`), or, where no session recorded them,
+    the most runs any of the sweep's cells holds.
 
     A cell is whole when every method of the sweep has a row for every run index below that count, and, in a
     directory that keeps series, every such run has a readable series file; an unreadable series summary makes
@@ -253,7 +273,7 @@ def incomplete_cells(sweep: Sweep, out: Path) -> tuple[dict[str, str], int]:
     unreadable = {store.cell_of(p) for p, _ in damaged}
     summary = store.unreadable_summary(out)
     mine = rows[rows["cell_id"].isin({c.cell_id for c in sweep.cells}) & rows["method"].isin(sweep.spec.methods)]
-    count = int(mine["run"].max()) + 1 if len(mine) else 0
+    count = last_session_runs(out) or (int(mine["run"].max()) + 1 if len(mine) else 0)
     out_cells = {}
     for cell in sweep.cells:
         if cell.cell_id in unreadable:
