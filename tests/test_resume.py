@@ -477,3 +477,16 @@ def test_with_series_none_an_unreadable_summary_is_left_as_it_is_and_still_named
     assert again.returncode == 0 and "summary.parquet cannot be read" not in again.stderr, again.stderr
     assert summary.read_bytes() == b"junk" and not summary.with_name(".summary.parquet.damaged").exists()
     assert "the series summary cannot be read" in cli("tables", out).stderr
+
+
+def test_the_run_count_of_a_directory_is_its_sweep_s_last_recorded_session(tmp_path):
+    """``tables``' mending command takes ``--runs`` from the last session of the same sweep in sessions.jsonl: a
+    session of a sweep added with --add, a damaged line and sessions of older versions (no runs) are passed over."""
+    from tanbench.runner.resume import last_session_runs
+
+    assert last_session_runs(tmp_path, "a") is None  # no sessions.jsonl
+    (tmp_path / "sessions.jsonl").write_text("\n".join([
+        '{"sweep": "a", "runs": 3}', '{"tasks_run": 4}', '{"sweep": "b", "runs": 50}', "not json", "[1, 2]", ""]))
+    assert last_session_runs(tmp_path, "a") == 3
+    assert last_session_runs(tmp_path, "b") == 50
+    assert last_session_runs(tmp_path, "c") is None

@@ -239,7 +239,8 @@ def log_session(out: Path, report: RunReport, plan: Plan, scheduler) -> None:
         "started": (_dt.datetime.now(_dt.timezone.utc) - _dt.timedelta(seconds=report.wall_s)).isoformat(
             timespec="seconds"),
         "wall_s": round(report.wall_s, 2), "tasks_run": report.finished, "tasks_skipped": report.skipped,
-        "failed_rows": report.failed_rows, "interrupted": report.interrupted, "runs": plan.sweep.spec.runs,
+        "failed_rows": report.failed_rows, "interrupted": report.interrupted, "sweep": plan.sweep.name,
+        "runs": plan.sweep.spec.runs,
         "workers": plan.workers,
         "scheduler": scheduler or "local", "cpu_count": os.cpu_count(), "tanbench_version": __version__,
     }

@@ -239,18 +239,20 @@ def _owner(out: Path, rows: pd.DataFrame) -> tuple[str | None, str]:
         return None, "runs"
 
 
-def last_session_runs(out: Path) -> int | None:
-    """The runs per cell the last session of ``out`` was asked for (its ``--runs``, or its sweep file's), from
-    ``sessions.jsonl`` (``engine.log_session``); None where no session recorded it (results of older versions)."""
+def last_session_runs(out: Path, sweep_name: str) -> int | None:
+    """The runs per cell the last session of sweep ``sweep_name`` in ``out`` was asked for (its ``--runs``, or its
+    sweep file's), from ``sessions.jsonl`` (``engine.log_session``; a sweep added with ``--add`` logs its own); None
+    where no session of it recorded them (results of older versions)."""
     try:
         lines = (out / "sessions.jsonl").read_text().splitlines()
     except OSError:
         return None
     for line in reversed(lines):
         try:
-            runs = json.loads(line).get("runs")
-        except (ValueError, AttributeError):
+            entry = json.loads(line)
+        except ValueError:
             continue
+        runs = entry.get("runs") if isinstance(entry, dict) and entry.get("sweep") == sweep_name else None
         if isinstance(runs, int) and runs > 0:
             return runs
     return None
@@ -273,7 +275,7 @@ def incomplete_cells(sweep: Sweep, out: Path) -> tuple[dict[str, str], int]:
     unreadable = {store.cell_of(p) for p, _ in damaged}
     summary = store.unreadable_summary(out)
     mine = rows[rows["cell_id"].isin({c.cell_id for c in sweep.cells}) & rows["method"].isin(sweep.spec.methods)]
-    count = last_session_runs(out) or (int(mine["run"].max()) + 1 if len(mine) else 0)
+    count = last_session_runs(out, sweep.name) or (int(mine["run"].max()) + 1 if len(mine) else 0)
     out_cells = {}
     for cell in sweep.cells:
         if cell.cell_id in unreadable:
