@@ -547,7 +547,7 @@ def terrain_stats(
 
 
 @terrain_app.command("info", help="A map's nodes, spacing, extent in tanbench's frame (where a trajectory's "
-                     "start_en_m or centre_en_m goes) and depths, as a sweep's terrain reads it."
+                     "start_en_m or centre_en_m goes) and elevations, as a sweep's terrain reads it."
                      + EXAMPLE.format("tanbench terrain info '../shared/data/monterey/MontereyBay.R_*.tif'"))
 def terrain_info(
     path: Optional[str] = typer.Argument(None, help="A map file or a quoted glob of tiles (terrain kind file)."),
@@ -579,7 +579,7 @@ def terrain_info(
         try:
             m = truth_map(spec)
         except TanbenchError as exc:
-            if sweep_file is not None:
+            if sweep_file is not None or "georeferenc" not in str(exc):
                 raise
             raise TanbenchError(f"{exc} (terrain info takes --rows and --crs; for other terrain options write them "
                                 f"in a sweep's terrain and give --sweep)") from None

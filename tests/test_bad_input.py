@@ -376,7 +376,16 @@ CASES = [
          "synthetic:paper:seed1: 1201 x 481 nodes at 2.50 x 2.50 m; E 0.0 .. 3000.0 m, N 0.0 .. 1200.0 m; "
          "elevation (up positive) -120.9 .. 0.0 m", code=0),
     case("dask-scheduler-malformed", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "bogus"],
-         BASE, "--scheduler bogus: not a Dask scheduler address", "give HOST:PORT", absent=("within",)),
+         BASE, "--scheduler 'bogus': not a Dask scheduler address", "give HOST:PORT", absent=("within",),
+         then=lambda tmp, proc: no_directory(tmp / "out")),
+    case("dask-scheduler-unknown-protocol", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "htp://h:8786"],
+         BASE, "unknown protocol 'htp'"),
+    case("dask-scheduler-with-a-space", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "tcp://h :8786"],
+         BASE, "it holds a space"),
+    case("dask-scheduler-without-a-host", ["run", "{sweep}", "--out", "{tmp}/out", "--scheduler", "tcp://:8786"],
+         BASE, "no host"),
+    case("terrain-info-bare-npy", ["terrain", "info", "{maps}/map.npy"], None, "no usable georeferencing",
+         "give --sweep"),
 ]
 
 

@@ -520,3 +520,25 @@ def test_a_sweep_of_other_kernel_variants_is_not_charged_a_staged_compile():
     assert unstaged == pytest.approx(planning.COMPILE_SHARED_S + planning.COMPILE_JOIN_S + max(
         planning.COMPILE_FAMILY_S["tight"], planning.COMPILE_ALONE_S["loose"]))
     assert planning.compile_seconds(default_kernels, default_kernels, processes=2) < unstaged
+
+
+@pytest.mark.parametrize("sweep_file", sorted(p.name for p in (ROOT / "configs").glob("*.yaml")))
+def test_the_plan_charges_a_staged_compile_exactly_where_run_stages_one(sweep_file):
+    """The plan's estimate counts a staged side-by-side compile (plan.staged_groups) where run stages one: the shares
+    compile_stages.shares_for gives the groups for the first cell run warms up on (engine.filter_variants)."""
+    import json
+
+    from tanbench.config import Scenario
+    from tanbench.errors import TanbenchError
+    from tanbench.runner.compile_stages import shares_for
+    from tanbench.runner.engine import filter_variants
+
+    try:
+        sweep = load_sweep(ROOT / "configs" / sweep_file)
+    except TanbenchError as exc:  # a sweep over ../shared's maps, where they are not beside the clone
+        pytest.skip(str(exc))
+    plan = planning.make_plan(sweep, Path("/nonexistent/results"), workers=2)
+    kernels = plan.kernels()
+    groups = planning.compile_groups(kernels, 2, kernels)
+    first = Scenario(**json.loads(filter_variants(plan.todo)[0]))
+    assert planning.staged_groups(groups, kernels) == (len(groups) > 1 and any(shares_for(groups, first)))

@@ -479,6 +479,18 @@ def test_with_series_none_an_unreadable_summary_is_left_as_it_is_and_still_named
     assert "the series summary cannot be read" in cli("tables", out).stderr
 
 
+def test_tables_asks_for_the_runs_of_the_last_session_even_where_no_cell_reached_them(tiny, tmp_path):
+    """A session asked for 5 runs and stopped after the first 3 of every cell: the cells are even, yet incomplete;
+    tables names them and asks for --runs 5 (the stored runs alone would say 3, and complete)."""
+    path, out = copied(tiny, tmp_path)
+    with open(out / "sessions.jsonl", "a") as fh:
+        fh.write('{"sweep": "tiny", "runs": 5, "interrupted": true}\n')
+    tables = cli("tables", out)
+    assert "missing run 3 of" in tables.stderr and "--runs 5" in tables.stderr, tables.stderr
+    (out / "sessions.jsonl").write_text('{"sweep": "tiny", "runs": 2}\n')  # fewer than stored: the stored count holds
+    assert "warning" not in cli("tables", out).stderr
+
+
 def test_the_run_count_of_a_directory_is_its_sweep_s_last_recorded_session(tmp_path):
     """``tables``' mending command takes ``--runs`` from the last session of the same sweep in sessions.jsonl: a
     session of a sweep added with --add, a damaged line and sessions of older versions (no runs) are passed over."""
@@ -490,3 +502,13 @@ def test_the_run_count_of_a_directory_is_its_sweep_s_last_recorded_session(tmp_p
     assert last_session_runs(tmp_path, "a") == 3
     assert last_session_runs(tmp_path, "b") == 50
     assert last_session_runs(tmp_path, "c") is None
+
+
+def test_the_lock_of_a_directory_removed_meanwhile_is_one_clear_error(tmp_path):
+    """store.directory_lock on a directory that is gone (removed by a refused run that had created it, between this
+    run's check and its lock): one TanbenchError line, not a FileNotFoundError."""
+    from tanbench.errors import TanbenchError
+
+    with pytest.raises(TanbenchError, match="was removed while this run started"):
+        with store.directory_lock(tmp_path / "gone"):
+            pass

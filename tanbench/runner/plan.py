@@ -43,9 +43,9 @@ SIMULATION_S = 0.022  # one run's vehicle data (1190 s at 100 Hz; the world's ra
 # tight 0.86 (0.829, 0.883), loose alone 0.81 (1 pair). pmf, mpf, ekf and tercom: measured again on 3 Dec 2026
 # (seventh session, docs/speed.md) in one process on a fresh cache after the simulation, in this order, without
 # the tight family: 15.32, 11.68, 7.78 and 4.67 s of thread CPU on that VM, over its speed factor 0.481.
-# The simulation, tight and loose measured again on 5 Dec 2026 (nineteenth session, docs/speed.md; the likely cause of
-# the change, not measured apart: the tight loop's tempering and adaptive-count paths, loose-dvl's gates): one process
-# on an empty
+# The simulation, tight and loose measured again on 5 Dec 2026 (nineteenth session, docs/speed.md; the likely cause
+# of the change, not measured apart: the tight loop's tempering and adaptive-count paths, loose-dvl's gates): one
+# process on an empty
 # cache, thread CPU over the machine's speed factor (0.48-0.50), /work/notes/s19/compile_seq.py: the simulation 7.6,
 # 7.4, 7.0; tight 64.1, 62.4; loose after tight 29.7, 29.5; loose alone 64.4 (after the simulation).
 COMPILE_SHARED_S = 7.3
@@ -235,13 +235,15 @@ def load_stages_table() -> dict:
 def staged_groups(groups, kernels=None) -> bool:
     """Whether side-by-side compile ``groups`` (lists of method names, :func:`compile_groups`) are staged by the
     table: more than one group, every family of the table in a group of its own, and (given the compiled
-    ``kernels``, names with their variants, :func:`cell_kernels`) every kernel of the table's families in its default
-    variant, the one the table's argument types are of (``compile_stages.shares_for`` asks it of the cell it warms
-    up on)."""
+    ``kernels``, names with their variants in the cells' order, :func:`cell_kernels`) each method of the table's
+    families first in its default variant, the one the table's argument types are of (``compile_stages.shares_for``
+    asks it of the first cell with cold kernels, which ``run`` warms up on)."""
     table = load_stages_table().get("shares", {})
     group_of = {family_of(m): i for i, g in enumerate(groups) for m in g}  # compile_groups keeps a family whole
-    defaults = all(not kernel_cache.variant_of(k) for k in kernels or ()
-                   if family_of(kernel_cache.method_of(k)) in table)
+    first = {}  # each method's first kernel: the variant of the cell run warms up on (its first with cold kernels)
+    for k in kernels or ():
+        first.setdefault(kernel_cache.method_of(k), kernel_cache.variant_of(k))
+    defaults = all(not variant for m, variant in first.items() if family_of(m) in table)
     return (len(groups) > 1 and bool(table) and defaults and all(f in group_of for f in table)
             and len({group_of[f] for f in table}) == len(table))
 

@@ -260,8 +260,8 @@ def last_session_runs(out: Path, sweep_name: str) -> int | None:
 
 def incomplete_cells(sweep: Sweep, out: Path) -> tuple[dict[str, str], int]:
     """Per cell of ``sweep`` whose stored runs in ``out`` are not whole: what is missing; and the directory's run
-    count: the runs its last session was asked for (:func:`last_session_runs`), or, where no session recorded them,
-    the most runs any of the sweep's cells holds.
+    count: the larger of the runs the sweep's last session there was asked for (:func:`last_session_runs`; none in
+    results of older versions) and the most runs any of its cells holds (a session killed outright logs nothing).
 
     A cell is whole when every method of the sweep has a row for every run index below that count, and, in a
     directory that keeps series, every such run has a readable series file; an unreadable series summary makes
@@ -275,7 +275,7 @@ def incomplete_cells(sweep: Sweep, out: Path) -> tuple[dict[str, str], int]:
     unreadable = {store.cell_of(p) for p, _ in damaged}
     summary = store.unreadable_summary(out)
     mine = rows[rows["cell_id"].isin({c.cell_id for c in sweep.cells}) & rows["method"].isin(sweep.spec.methods)]
-    count = last_session_runs(out, sweep.name) or (int(mine["run"].max()) + 1 if len(mine) else 0)
+    count = max(last_session_runs(out, sweep.name) or 0, int(mine["run"].max()) + 1 if len(mine) else 0)
     out_cells = {}
     for cell in sweep.cells:
         if cell.cell_id in unreadable:
