@@ -586,10 +586,17 @@ def terrain_info(
         ny, nx = m.shape
         finite = m.z[np.isfinite(m.z)]
         frame = m.meta.get("crs", "metric")
+        where = ""
+        if frame == "local":  # lon/lat projected: where the frame's corners are on the globe
+            from tanbench.terrain.georef import local_to_lonlat
+
+            lon, lat = local_to_lonlat(m, [m.e0, m.e_max], [m.n0, m.n_max])
+            where = f" (E {m.e0:.1f}, N {m.n0:.1f} m is lon {lon[0]:.5f}, lat {lat[0]:.5f}; E {m.e_max:.1f}, " \
+                    f"N {m.n_max:.1f} m is lon {lon[1]:.5f}, lat {lat[1]:.5f})"
         typer.echo(f"{m.name or spec.kind}: {nx} x {ny} nodes at {m.res_e:.2f} x {m.res_n:.2f} m; "
                    f"E {m.e0:.1f} .. {m.e_max:.1f} m, N {m.n0:.1f} .. {m.n_max:.1f} m; elevation (up positive) "
                    f"{finite.min():.1f} .. {finite.max():.1f} m, mean {finite.mean():.1f}; "
-                   f"{m.z.size - finite.size} holes; frame {frames.get(frame, frame)}")
+                   f"{m.z.size - finite.size} holes; frame {frames.get(frame, frame)}{where}")
     typer.echo("E and N are the frame of a trajectory's start_en_m and centre_en_m (docs/maps.md).")
 
 

@@ -168,3 +168,20 @@ def test_content_hash_follows_the_bytes_not_the_names(tmp_path, grid):
 
 def test_content_hash_of_a_synthetic_terrain_is_none():
     assert terrain_content_hash(TerrainSpec()) is None
+
+
+@pytest.mark.skipif(not (Path(__file__).resolve().parents[1].parent / "shared" / "data" / "monterey").is_dir(),
+                    reason="the Monterey tiles (../shared/data/monterey) are not here")
+def test_terrain_info_places_a_lonlat_map_on_the_globe():
+    """``tanbench terrain info`` of the Monterey tiles (Web Mercator, projected to the local frame): the extent in
+    metres and the lon/lat of the south-west and north-east nodes, from the map's own projection."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, "-m", "tanbench", "terrain", "info",
+                           "../shared/data/monterey/MontereyBay.R_*.tif"], cwd=root, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    line = proc.stdout.splitlines()[0]
+    assert "227 x 227 nodes" in line and "frame local" in line
+    assert "E 0.0, N 0.0 m is lon -121.82546, lat 36.78954" in line
