@@ -63,8 +63,9 @@ def new_option(default, *, neutral=_SAME, **field_kwargs):
 
 
 # the loose TAN's options that act only in its loop with heading offsets (filters/loose_turned.py): a value other
-# than the neutral one needs filter.loose_heading_offsets (named in this order)
-TURNED_LOOP_ONLY = ("loose_fix_fit_one_wild_beam", "loose_reopen_heading", "loose_reopen_position", "loose_first_fix",
+# than the neutral one (the key's, ``new_option``) needs filter.loose_heading_offsets (named in this order)
+TURNED_LOOP_ONLY = ("loose_bias_gate_sigma", "loose_fix_shape", "loose_fix_prior_gate", "loose_fix_fit_test",
+                    "loose_fix_fit_one_wild_beam", "loose_reopen_heading", "loose_reopen_position", "loose_first_fix",
                     "loose_fix_correlation_s")
 
 
@@ -571,10 +572,7 @@ class FilterSpec(_Strict):
     def _gates_need_heading_offsets(self):
         if not self.loose_heading_offsets:
             # every option that acts only in the loop with heading offsets, and the value it must take without it
-            allowed = {"loose_bias_gate_sigma": None, "loose_fix_shape": None, "loose_fix_prior_gate": None,
-                       "loose_fix_fit_test": True}
-            allowed.update({name: type(self).model_fields[name].json_schema_extra["key_neutral"]
-                            for name in TURNED_LOOP_ONLY})
+            allowed = {name: type(self).model_fields[name].json_schema_extra["key_neutral"] for name in TURNED_LOOP_ONLY}
             wrong = [(name, getattr(self, name), value) for name, value in allowed.items()
                      if getattr(self, name) != value]
             if wrong:  # all of them in one line, so that one edit of the sweep file mends them
