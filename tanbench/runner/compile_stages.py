@@ -89,9 +89,7 @@ def _resolve(module: str, qualname: str):
 
 # --- using the table ---------------------------------------------------------------------------------
 
-def load_table() -> dict:
-    """The recorded table (empty if there is none): :func:`tanbench.runner.plan.load_stages_table`."""
-    return load_stages_table()
+load_table = load_stages_table  # the recorded table (empty if there is none), read once per process
 
 
 def shares_for(groups, scenario=None) -> list[list]:
