@@ -108,3 +108,33 @@ def test_no_method_changes_another_methods_or_a_later_runs_inputs(userland, tmp_
             "mean_horizontal_error_m", "final_heading_error_deg"]
     tight = comparable(runs[runs["method"] == "tight-dvl"])[keep].reset_index(drop=True)
     pd.testing.assert_frame_equal(tight, comparable(results.load(tmp_path / "alone"))[keep].reset_index(drop=True))
+
+
+@pytest.mark.parametrize("world", ["synthetic", "monterey"])
+def test_the_map_metadata_a_method_is_given_cannot_rebuild_the_truth(world):
+    """The navigation map's metadata carried the truth's recipe (a synthetic terrain's layout and
+    seed, the truth file's path, its name): with it a plug-in could rebuild the true terrain, which
+    ``ctx.scenario.terrain`` withholds. A method is given only what a vehicle's own map carries."""
+    import glob
+
+    from tanbench.config import Scenario
+    from tanbench.methods import method_context
+    from tanbench.methods.api import NAVIGATION_MAP_META, NAVIGATION_MAP_NAME
+    from tanbench.simulation import simulate_vehicle
+    from tanbench.sweep import load_sweep
+    from tanbench.terrain import navigation_map
+
+    if world == "monterey":
+        if not glob.glob("../shared/data/monterey/*.tif"):
+            pytest.skip("the Monterey tiles of ../shared are not here")
+        sc = load_sweep("configs/monterey.yaml").cells[0].scenario.model_copy(update={"particles": 60})
+    else:
+        sc = Scenario(duration_s=30, particles=60)
+    full = navigation_map(sc.terrain, sc.map_resolution_m)
+    assert {"seed", "path", "derived_from"} & set(full.meta)  # what there was to withhold
+    ctx = method_context(sc, "tight-dvl", simulate_vehicle(sc, np.random.SeedSequence(1)), np.random.SeedSequence(2))
+    assert set(ctx.nmap.meta) <= set(NAVIGATION_MAP_META)
+    assert ctx.nmap.meta["map_error_m"] == full.meta["map_error_m"]
+    assert ctx.nmap.name == NAVIGATION_MAP_NAME
+    assert ctx.scenario.terrain is None
+    assert full.name not in repr(ctx.nmap.meta)

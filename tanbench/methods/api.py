@@ -199,11 +199,22 @@ def _read_only_fields(obj):
     return dataclasses.replace(obj, **{k: read_only(v) for k, v in values.items() if isinstance(v, np.ndarray)})
 
 
+# what a method may read of the navigation map's metadata: what a vehicle's own map carries (its
+# node spacing, its declared level error, its georeference). The rest says how the world was built
+# (a synthetic terrain's layout and seed, the path of the truth's file, how it was resampled and
+# rescaled, the map's name): enough to rebuild the true terrain, so it is withheld.
+NAVIGATION_MAP_META = ("resolution_m", "map_error_m", "crs", "m_per_deg_lon", "m_per_deg_lat", "lon0", "lat0",
+                       "projection_error_m")
+NAVIGATION_MAP_NAME = "navigation map"
+
+
 def method_inputs(obs: Observations, nmap: Map) -> tuple[Observations, Map]:
     """What one method is given of a run's observations and of the navigation map: its own
-    copies of the objects, whose arrays are read-only views of the run's (no data is copied)."""
+    copies of the objects, whose arrays are read-only views of the run's (no data is copied); of
+    the map's metadata only :data:`NAVIGATION_MAP_META`, under a neutral name."""
     own_obs = dataclasses.replace(_read_only_fields(obs), nav=_read_only_fields(obs.nav))
-    return own_obs, dataclasses.replace(nmap, z=read_only(nmap.z), meta=copy.deepcopy(nmap.meta))
+    meta = {k: copy.deepcopy(v) for k, v in nmap.meta.items() if k in NAVIGATION_MAP_META}
+    return own_obs, dataclasses.replace(nmap, z=read_only(nmap.z), name=NAVIGATION_MAP_NAME, meta=meta)
 
 
 READ_ONLY_WORDS = ("read-only", "readonly", "WRITEABLE")
