@@ -296,6 +296,17 @@ def test_keep_on_map_matches_numpy(point):
     assert not keep_on_map(far, np.array([1.0, 0.0, 0.0, 0.0])) and far[0] == 1e6
 
 
+@pytest.mark.parametrize("point", [(np.nan, 50.0), (np.nan, 150.0), (-10.0, np.nan)])
+def test_keep_on_map_numpy_agrees_on_a_nan_estimate(point):
+    """A NaN coordinate compares False with both bounds: the kernel leaves it and reports only the
+    other coordinate; the reference said the NaN had left the map (NaN != NaN; found by an audit)."""
+    bounds = np.array([0.0, 100.0, 0.0, 110.0])
+    mean = np.array([*point, 7.0])
+    clamped, out_ref = keep_on_map_numpy(mean, bounds)
+    assert keep_on_map(mean, bounds) == out_ref
+    np.testing.assert_array_equal(mean, clamped)
+
+
 def test_recovery_stats():
     t = np.arange(40.0)
     reinit = np.zeros(40, dtype=np.int64)

@@ -483,4 +483,6 @@ def keep_on_map_numpy(mean, bounds):
     clamped = mean.copy()
     clamped[0] = np.clip(mean[0], bounds[0], bounds[1])
     clamped[1] = np.clip(mean[1], bounds[2], bounds[3])
-    return clamped, bool((clamped[:2] != mean[:2]).any())
+    # beyond a bound, as the kernel compares: a NaN coordinate is not (and stays NaN)
+    left = (mean[0] < bounds[0]) | (mean[0] > bounds[1]) | (mean[1] < bounds[2]) | (mean[1] > bounds[3])
+    return clamped, bool(left)
