@@ -2,12 +2,14 @@
 covariance ``diag(150 m, 150 m, ...)^2``, a Gaussian (``filter.initial_cloud: gaussian``).
 
 Particles are the columns of ``x`` (rows 0 and 1: east, north); the draws are block fills
-(``rng.fill_uniforms``, ``rng.fill_normals``), east row then north row.
+(``rng.fill_uniforms``, ``rng.fill_normals``), east row then north row. Each kernel has a
+plain-numpy reference (``*_numpy``) fed the numbers its fill draws.
 """
 
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
 from tanbench.filters import FASTMATH
 from tanbench.filters.rng import fill_normals, fill_uniforms
@@ -25,6 +27,17 @@ def uniform_horizontal(x, rng, centre_e, centre_n, half_side):
     fill_uniforms(rng, x[0:2], -half_side, half_side)
     _scale_shift(x[0], 1.0, centre_e)
     _scale_shift(x[1], 1.0, centre_n)
+
+
+def uniform_horizontal_numpy(x, uniforms, centre_e, centre_n, half_side):
+    """Plain-numpy reference of :func:`uniform_horizontal` (returns a new array): ``uniforms`` (2, M)
+    are the [0, 1) uniforms of the kernel's fill (``rng.uniforms_from_words_numpy`` of its words, or
+    ``rng.fill_numpy``), which it scales to [-half_side, half_side)."""
+    x = np.array(x, dtype=float)
+    low, high = -half_side, half_side
+    x[0] = centre_e + (low + (high - low) * uniforms[0])
+    x[1] = centre_n + (low + (high - low) * uniforms[1])
+    return x
 
 
 @nb.njit(cache=True)

@@ -39,11 +39,11 @@ import numba as nb
 import numpy as np
 
 from tanbench.filters.beams import nav_frame_offsets
-from tanbench.filters.cloud import uniform_horizontal
+from tanbench.filters.cloud import uniform_horizontal, uniform_horizontal_numpy
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.resample import (effective_sample_size, normalize_log_weights, resample_and_regularise,
                                       resampling_of)
-from tanbench.filters.rng import fill_normals
+from tanbench.filters.rng import fill_normals, fill_numpy
 from tanbench.filters.tight import divergence_of
 from tanbench.filters.trig import sin_cos
 from tanbench.navigation.increments import D0E, D0N, DYAW, JAZE, JAZN, SZ
@@ -182,6 +182,20 @@ def init_mpf(x, rng, centre_e, centre_n, yaw, half_side, std_yaw, var_b, var_eps
         x[PB, j] = var_b
         x[EPS, j] = 0.0
         x[PEPS, j] = var_eps
+
+
+def init_mpf_numpy(x, rng, centre_e, centre_n, yaw, half_side, std_yaw, var_b, var_eps):
+    """Plain-numpy reference of :func:`init_mpf` (returns a new array of ``x``'s shape): its numbers drawn
+    from ``rng`` as the kernel's fills draw them (``rng.fill_numpy``, ``rng`` advanced in place): the square's
+    uniforms (east row, then north), then the yaw row's normals."""
+    m = np.shape(x)[1]
+    x = uniform_horizontal_numpy(np.empty((N_MPF, m)), fill_numpy(rng, (2, m), False), centre_e, centre_n, half_side)
+    x[PSI] = yaw + std_yaw * fill_numpy(rng, m, True)
+    x[B] = 0.0
+    x[PB] = var_b
+    x[EPS] = 0.0
+    x[PEPS] = var_eps
+    return x
 
 
 @nb.njit(cache=True)

@@ -27,7 +27,8 @@ The loops draw their noise in blocks, a whole (rows, M) array per call, with
 
 ``xoshiro_numpy``, ``lane_words_numpy``, ``normals_from_words_numpy`` and
 ``uniforms_from_words_numpy`` are the plain-Python references the tests check the jitted
-generator against.
+generator against; ``fill_numpy``, made of them, is the fills' (the numbers a fill draws from
+a loop's generator, and the generator's state after them).
 """
 
 from __future__ import annotations
@@ -592,6 +593,11 @@ def lane_words_numpy(words, rounds: int) -> tuple[np.ndarray, np.ndarray]:
 
 def normals_from_words_numpy(w, scalar_state) -> np.ndarray:
     """Reference of :func:`normals_from_words` (``scalar_state``: the scalar stream, not changed)."""
+    return normals_and_state_numpy(w, scalar_state)[0]
+
+
+def normals_and_state_numpy(w, scalar_state) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`normals_from_words_numpy` and the scalar stream's state after it (``scalar_state`` not changed)."""
     state = np.asarray(scalar_state, dtype=np.uint64).copy()
 
     def word():
@@ -621,10 +627,43 @@ def normals_from_words_numpy(w, scalar_state) -> np.ndarray:
                 break
             u = word()
         out[j] = -x if negative else x
-    return out
+    return out, state
 
 
 def uniforms_from_words_numpy(w, low: float = 0.0, high: float = 1.0) -> np.ndarray:
     """Reference of :func:`uniforms_from_words`."""
     u = (np.asarray(w, dtype=np.uint64) >> np.uint64(12)).astype(np.float64) * 2.0**-52
     return low + (high - low) * u
+
+
+def fill_numpy(rng, shape, normal: bool, low: float = 0.0, high: float = 1.0) -> np.ndarray:
+    """Plain-numpy reference of the fills (:func:`fill_normals`, :func:`fill_uniforms`): an array of
+    ``shape`` (C order) of standard normals (``normal``) or uniforms in [low, high), drawn from ``rng``
+    as a jitted fill draws them, and ``rng`` advanced as the fill advances it (in place). ``rng`` is what
+    the loops draw from (:func:`loop_rng`): a fast generator's state words, made into the numbers by
+    :func:`lane_words_numpy`, :func:`normals_and_state_numpy` and :func:`uniforms_from_words_numpy` in
+    chunks of ``CHUNK`` as :func:`_fast_fill` makes them (each chunk's words rounded up to whole rounds of
+    the lanes, the rest dropped); or numpy's stream (a :class:`~tanbench.numpy_stream.Pcg64Stream` or a
+    Generator), drawn by the Generator itself."""
+    size = int(np.prod(shape, dtype=np.int64))
+    if isinstance(rng, np.ndarray):
+        if rng.dtype != np.uint64 or rng.shape != (FAST_WORDS,):
+            raise ValueError(f"a fast generator's state is {FAST_WORDS} uint64 words")
+        out = np.empty(size)
+        words = rng.copy()
+        for start in range(0, size, CHUNK):
+            part = min(CHUNK, size - start)
+            made, words[:LANE_WORDS] = lane_words_numpy(words[:LANE_WORDS], (part + LANES - 1) // LANES)
+            if normal:
+                out[start:start + part], words[LANE_WORDS:] = normals_and_state_numpy(made[:part], words[LANE_WORDS:])
+            else:
+                out[start:start + part] = uniforms_from_words_numpy(made[:part], low, high)
+        rng[...] = words
+        return out.reshape(shape)
+    generator = getattr(rng, "generator", rng)  # a Pcg64Stream draws what its Generator draws
+    if not isinstance(generator, np.random.Generator):
+        raise TypeError(f"cannot draw from {type(rng).__name__}: a fast generator's state words, a Pcg64Stream "
+                        "or a numpy Generator")
+    if normal:
+        return generator.standard_normal(size).reshape(shape)
+    return generator.uniform(low, high, size).reshape(shape)
