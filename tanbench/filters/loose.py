@@ -29,7 +29,7 @@ from tanbench.filters.cloud import gaussian_horizontal, uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
 from tanbench.filters.likelihood import (BLOCK, Likelihood, beam_constants, loglik_loose_pass, new_likelihood_work, used_offsets,
                                         work_block)
-from tanbench.filters.propagate import dead_reckon, propagate_loose
+from tanbench.filters.propagate import dead_reckon, dead_reckon_numpy, propagate_loose
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
 from tanbench.filters.state import BZ, E, N, N_TIGHT, U, YAW
@@ -200,6 +200,19 @@ def position_reset(p_kf, r, nav, zt):
     p_kf[EN, EN] = r[1, 1]
 
 
+def position_reset_numpy(p_kf, r, nav, zt):
+    """Plain-numpy reference of :func:`position_reset`: returns (new covariance, new navigation); the
+    position's rows and columns of ``p_kf`` zero but for their 2x2 block, which is ``r``."""
+    p = np.array(p_kf, dtype=np.float64)
+    pos = [EE, EN]
+    p[pos, :] = 0.0
+    p[:, pos] = 0.0
+    p[np.ix_(pos, pos)] = r
+    nav = np.array(nav, dtype=np.float64)
+    nav[[E, N], 0] = zt[:2]
+    return p, nav
+
+
 @nb.njit(cache=True)
 def reopen_kf(p_kf, p0_pos, p0_yaw):
     """Recovery of a locked-out navigation KF (``kf.misses`` fixes rejected in a row: the
@@ -214,6 +227,16 @@ def reopen_kf(p_kf, p0_pos, p0_yaw):
     p_kf[EE, EE] = p0_pos
     p_kf[EN, EN] = p0_pos
     p_kf[EPSI, EPSI] = 0.25 * p0_yaw
+
+
+def reopen_kf_numpy(p_kf, p0_pos, p0_yaw):
+    """Plain-numpy reference of :func:`reopen_kf` (returns a new covariance): the bias's own variance kept,
+    everything else replaced by diag(p0_pos, p0_pos, p0_yaw / 4) on the position and heading."""
+    p = np.zeros((N_ERROR, N_ERROR))
+    p[EE, EE] = p[EN, EN] = p0_pos
+    p[EPSI, EPSI] = 0.25 * p0_yaw
+    p[EB, EB] = p_kf[EB, EB]
+    return p
 
 
 @nb.njit(cache=True)
@@ -262,6 +285,44 @@ def navigation_step(nav, inc_row, yaw_nav, up_nav):
     nav[U, 0] = up_nav
     dead_reckon(nav, inc_row, yaw_nav)
     return nav[E, 0] - e_before, nav[N, 0] - n_before, b_e, b_n
+
+
+def navigation_step_numpy(nav, inc_row, yaw_nav, up_nav):
+    """Plain-numpy reference of :func:`navigation_step`: (new navigation, d_e, d_n, b_e, b_n), the lever
+    (b_e, b_n) = -Rz(yaw - yaw_nav) [JAZE, JAZN] at the interval's start, the dead reckoning
+    :func:`~tanbench.filters.propagate.dead_reckon_numpy` from up ``up_nav``."""
+    nav = np.array(nav, dtype=np.float64)
+    with np.errstate(invalid="ignore"):  # an infinite heading offset: NaN, as the kernel's
+        turn = nav[YAW, 0] - yaw_nav
+        rz = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    b_e, b_n = -(rz @ np.array([inc_row[JAZE], inc_row[JAZN]]))
+    start = nav[[E, N], 0].copy()
+    nav[U, 0] = up_nav
+    nav = dead_reckon_numpy(nav, inc_row, yaw_nav)
+    d_e, d_n = nav[[E, N], 0] - start
+    return nav, float(d_e), float(d_n), float(b_e), float(b_n)
+
+
+@nb.njit(cache=True, inline="always")
+def advance_window_prior(m_prior, p_prior, d_e, d_n, sig_pos, sig_heading):
+    """The prior of the Kalman-feedback loop's fix window over one interval, in place: the mean ``m_prior``
+    (2,) moves by the corrected navigation's displacement (d_e, d_n), the covariance ``p_prior`` (2, 2)
+    grows by the particles' process noise: ``sig_pos``^2 on each axis and the cross-track variance
+    ``sig_heading``^2 (-d_n, d_e)(-d_n, d_e)^T of the heading std ``sig_heading`` (rad)."""
+    m_prior[0] += d_e
+    m_prior[1] += d_n
+    sh2 = sig_heading * sig_heading
+    p_prior[0, 0] += sig_pos * sig_pos + sh2 * d_n * d_n
+    p_prior[1, 1] += sig_pos * sig_pos + sh2 * d_e * d_e
+    p_prior[0, 1] -= sh2 * d_e * d_n
+    p_prior[1, 0] -= sh2 * d_e * d_n
+
+
+def advance_window_prior_numpy(m_prior, p_prior, d_e, d_n, sig_pos, sig_heading):
+    """Plain-numpy reference of :func:`advance_window_prior`: returns the new (mean, covariance)."""
+    across = np.array([-d_n, d_e])  # the displacement turned by 90 deg: where a heading error moves it
+    noise = sig_pos ** 2 * np.eye(2) + sig_heading ** 2 * np.outer(across, across)
+    return np.asarray(m_prior, dtype=np.float64) + np.array([d_e, d_n]), np.asarray(p_prior, dtype=np.float64) + noise
 
 
 @nb.njit(cache=True)
@@ -333,13 +394,7 @@ def loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out):
             sig_heading = math.sqrt(p_kf[EPSI, EPSI])
             eskf_predict(p_kf, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
             # the window's prior: the same motion and process noise as the particles
-            m_prior[0] += d_e
-            m_prior[1] += d_n
-            sh2 = sig_heading * sig_heading
-            p_prior[0, 0] += sig_pos * sig_pos + sh2 * d_n * d_n
-            p_prior[1, 1] += sig_pos * sig_pos + sh2 * d_e * d_e
-            p_prior[0, 1] -= sh2 * d_e * d_n
-            p_prior[1, 0] -= sh2 * d_e * d_n
+            advance_window_prior(m_prior, p_prior, d_e, d_n, sig_pos, sig_heading)
         # beams turned by the corrected heading's offset from the navigation heading
         s, c = math.sin(nav[YAW, 0] - nav_yaw[k]), math.cos(nav[YAW, 0] - nav_yaw[k])
         for i in range(nb_beams):

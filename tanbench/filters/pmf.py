@@ -226,6 +226,20 @@ def pmf_init(p, centres, deltas, centre_e, centre_n, sig_heading0):
     p /= total
 
 
+def pmf_init_numpy(shape, deltas, centre_e, centre_n, sig_heading0):
+    """Plain-numpy reference of :func:`pmf_init` for a bank ``p`` of ``shape`` (H, n, n): returns
+    (p, centres (H, 2)). Slice k's mass is in proportion to exp(-delta_k^2 / (2 sig^2)) (the same for
+    every slice of a single-slice bank or for sig <= 0), spread evenly over its nodes; the bank's mass 1;
+    every slice centred on (centre_e, centre_n)."""
+    h = shape[0]
+    d = np.asarray(deltas, dtype=np.float64)[:h]
+    with np.errstate(over="ignore", invalid="ignore"):  # weights underflowing to 0; all of them: 0 / 0, as the kernel's
+        weight = np.exp(-0.5 * (d / sig_heading0) ** 2) if (h > 1 and sig_heading0 > 0) else np.ones(h)
+        per_node = weight / (weight.sum() * shape[1] * shape[2])
+    p = np.broadcast_to(per_node[:, None, None], shape).copy()
+    return p, np.tile([centre_e, centre_n], (h, 1)).astype(np.float64)
+
+
 @nb.njit(cache=True)
 def pmf_loop(track, offsets, grid, settings, out):
     """Run the PMF over all K updates.

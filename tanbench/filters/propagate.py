@@ -35,7 +35,7 @@ import numpy as np
 from tanbench.filters import FASTMATH
 from tanbench.filters.state import BX, BZ, E, N, PITCH, ROLL, U, YAW
 from tanbench.filters.trig import (LEVEL, WOUND, attitude_sin_cos, attitude_wound, sin_cos_about, unwound,
-                                   unwound_attitude, wound_count)
+                                   unwound_attitude, unwound_numpy, wound_count)
 from tanbench.navigation.increments import (D0E, D0N, DPITCH, DROLL, DUP, DYAW, EU_VX, EU_VY, EU_WX, EU_WZ,
                                             JAXE, JAXN, JAZE, JAZN, SX, SZ)
 from tanbench.vehicle.attitude import dcm_body_to_nav_numpy
@@ -181,6 +181,28 @@ def dead_reckon(x, inc, yaw_nav0):
     de, dn = _displacement(0.0, 1.0, unwound(rows[5][0] - yaw_nav0), bx, bz, _lever(inc), 0.0, nz[0][0], nz[1][0])
     _move_particle(rows, nz, dist, 0, de, dn, inc[DYAW] + bx * inc[SX] - bz * inc[SZ],
                    shared_motion(inc, 0.0, 0.0, DIST_NONE))
+
+
+def dead_reckon_numpy(x, inc, yaw_nav0):
+    """Plain-numpy reference of :func:`dead_reckon` (returns a new array of ``x``'s shape, (8, 1)): the
+    navigation displacement corrected for the gyro biases and rotated by the heading offset
+    ``x[YAW] - yaw_nav0`` (a wound offset replaced as ``trig.sin_cos`` replaces it,
+    :func:`~tanbench.filters.trig.unwound_numpy`), yaw by the bias-corrected heading increment, up,
+    pitch and roll by their increments; no noise."""
+    x = np.array(x, dtype=np.float64)
+    bx, bz = x[BX], x[BZ]
+    with np.errstate(invalid="ignore"):  # sin and cos of an infinite offset: NaN, as the kernel's
+        delta = unwound_numpy(x[YAW] - yaw_nav0)
+        s, c = np.sin(delta), np.cos(delta)
+    ue = inc[D0E] + bx * inc[JAXE] - bz * inc[JAZE]
+    un = inc[D0N] + bx * inc[JAXN] - bz * inc[JAZN]
+    x[E] += c * ue - s * un
+    x[N] += s * ue + c * un
+    x[U] += inc[DUP]
+    x[PITCH] += inc[DPITCH]
+    x[ROLL] += inc[DROLL]
+    x[YAW] += inc[DYAW] + bx * inc[SX] - bz * inc[SZ]
+    return x
 
 
 @nb.njit(cache=True, inline="always")

@@ -436,3 +436,26 @@ def resample_and_regularise(x, w, logw, ess, rng, rs, dim, spread, uni, idx, scr
         s = rs.min_spread / math.sqrt(2.0)
         _add_scaled(x[0], s, noise[0])
         _add_scaled(x[1], s, noise[1])
+
+
+def resample_and_regularise_numpy(x, w, logw, ess, draw, rs, dim, spread):
+    """Plain-numpy reference of :func:`resample_and_regularise`: returns (new x, new log-weights).
+    ``draw(n, normal)`` gives the kernel's generator's next ``n`` standard normals (``normal``) or
+    uniforms in [0, 1), fill after fill (``rng.fills_numpy``): the kernel fills one uniform
+    (systematic) or M, then the jitter's (len(rs.cols), M) normals, then the re-spread's (2, M)."""
+    x = np.array(x, dtype=np.float64)
+    m = x.shape[1]
+    finite = logw[~np.isnan(logw)]  # NaN log-weights are passed over by the largest one
+    with np.errstate(invalid="ignore"):  # -inf less -inf: NaN, as the kernel's
+        logw = logw - (finite.max() if finite.size else -np.inf)
+    if ess >= rs.ess_threshold * m:
+        return x, logw
+    uniforms = draw(1 if rs.scheme == SYSTEMATIC else m, False)
+    x = x[:, resample_indices_numpy(rs.scheme, w, uniforms)]
+    if rs.kind != REG_NONE:
+        noise = draw(rs.cols.size * m, True).reshape(rs.cols.size, m)
+        x = (shrink_jitter_numpy(x, rs.cols, rs.size, noise) if rs.kind == REG_LIU_WEST
+             else roughen_numpy(x, rs.cols, rs.size, dim, noise))
+    if spread < rs.min_spread:
+        x[:2] += rs.min_spread / math.sqrt(2.0) * draw(2 * m, True).reshape(2, m)
+    return x, np.zeros_like(logw)

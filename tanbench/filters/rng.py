@@ -28,7 +28,8 @@ The loops draw their noise in blocks, a whole (rows, M) array per call, with
 ``xoshiro_numpy``, ``lane_words_numpy``, ``normals_from_words_numpy`` and
 ``uniforms_from_words_numpy`` are the plain-Python references the tests check the jitted
 generator against; ``fill_numpy``, made of them, is the fills' (the numbers a fill draws from
-a loop's generator, and the generator's state after them).
+a loop's generator, and the generator's state after them), and ``fills_numpy`` replays fill after
+fill from a copy of a generator's state (``resample.resample_and_regularise_numpy``).
 """
 
 from __future__ import annotations
@@ -667,3 +668,18 @@ def fill_numpy(rng, shape, normal: bool, low: float = 0.0, high: float = 1.0) ->
     if normal:
         return generator.standard_normal(size).reshape(shape)
     return generator.uniform(low, high, size).reshape(shape)
+
+
+def fills_numpy(rng):
+    """A plain-Python replay of the fills from ``rng`` (what a jitted loop draws from, as for
+    :func:`fill_numpy`) that leaves ``rng`` alone: a function ``draw(n, normal)`` giving the next ``n``
+    numbers that :func:`fill_normals` (``normal``) or :func:`fill_uniforms` would give, fill after fill,
+    by :func:`fill_numpy` on a copy of its state."""
+    if isinstance(rng, np.ndarray):
+        copy = np.asarray(rng, dtype=np.uint64).copy()
+    else:
+        generator = getattr(rng, "generator", rng)
+        twin = type(generator.bit_generator)()
+        twin.state = generator.bit_generator.state
+        copy = np.random.Generator(twin)
+    return lambda n, normal: fill_numpy(copy, n, normal)

@@ -146,6 +146,21 @@ def unwound(d):
     return wound_angle(d) if abs(d) > WOUND and d - d == 0.0 else d
 
 
+def wound_angle_numpy(d):
+    """Plain-numpy reference of :func:`wound_angle`, element by element (an array of ``d``'s shape): the
+    int64 product of d's bits and the constant wraps modulo 2^64, as the kernel's does."""
+    d = np.asarray(d, dtype=np.float64)
+    bits = np.atleast_1d(d).view(np.int64)
+    h = bits * HASH_MULTIPLIER  # an array product: wraps without a warning
+    return (((h >> 11) & FRACTION_MASK).astype(np.float64) * TURN_PER_2_53 - math.pi).reshape(d.shape)
+
+
+def unwound_numpy(d):
+    """Plain-numpy reference of :func:`unwound`, element by element (an array of ``d``'s shape)."""
+    d = np.asarray(d, dtype=np.float64)
+    return np.where((np.abs(d) > WOUND) & np.isfinite(d), wound_angle_numpy(d), d)
+
+
 @nb.njit(cache=True, error_model="numpy")
 def unwound_offsets(row, ref, out):
     """``out[j] = unwound(row[j] - ref)`` (:func:`unwound`)."""
