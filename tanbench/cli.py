@@ -19,6 +19,7 @@ import typer
 
 from tanbench import __version__
 from tanbench.errors import TanbenchError
+from tanbench.options import MAX_SEED
 from tanbench.runner.executors import single_thread_environment
 
 # before numpy, scipy or numba load: the CLI's numerics run one thread each, as its workers do, and it
@@ -344,7 +345,7 @@ def criterion(
              + EXAMPLE.format("tanbench simulate --area A --seed 1 --out run.parquet"))
 def simulate(
     area: Optional[str] = typer.Option(None, "--area", help="A, B or vehicle [default: A]."),
-    seed: int = typer.Option(1, "--seed", min=0, help="Seed of the run's vehicle data (0 or more)."),
+    seed: int = typer.Option(1, "--seed", min=0, max=MAX_SEED, help="Seed of the run's vehicle data (0 to 2**63 - 1)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="File to write: .parquet or .csv."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Seconds [default: the whole run]."),
     every: int = typer.Option(1, "--every", min=1, help="Keep every n-th IMU sample (--out only)."),
@@ -450,7 +451,7 @@ def replay(
     settings: Optional[Path] = typer.Option(None, "--settings", help="YAML of the methods' settings (profile, "
                                             "particles, sampling_time_s, filter, method_options) and the map's "
                                             "options (map: crs, rows, map_error_m, ...)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the methods' random numbers."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the methods' random numbers (0 to 2**63 - 1)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Results directory [default: results/replay-<log>]."),
 ):
     import pandas as pd

@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from typing import Literal
 
+# the largest root or run seed: results store seeds as 64-bit signed integers (Parquet int64)
+MAX_SEED = 2**63 - 1
+
 RESAMPLING = {"systematic": 0, "multinomial": 1, "stratified": 2, "residual": 3}
 REGULARISATION = {"none": 0, "liu-west": 1, "gordon": 2}
 # the tight filters' regularisation: the shared ``regularisation`` / ``min_spread_m``, or the posterior-sized kernel

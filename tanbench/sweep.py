@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from tanbench.config import Scenario, flatten, format_validation_error, plain_number_check
 from tanbench.errors import TanbenchError
+from tanbench.options import MAX_SEED
 from tanbench.profiles import PROFILES, profile_settings
 
 Value = Any
@@ -66,7 +67,7 @@ class SweepSpec(BaseModel):
 
     name: str
     description: str = ""
-    seed: int = Field(ge=0)
+    seed: int = Field(ge=0, le=MAX_SEED)
     runs: int = Field(gt=0, le=100_000)
     methods: list[str] = Field(default_factory=lambda: list(DEFAULT_METHODS), min_length=1)
     profile: str | None = Field(None, description="a named set of settings (tanbench.profiles) under `scenario`")

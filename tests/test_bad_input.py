@@ -199,6 +199,11 @@ CASES = [
     case("negative-runs", ["run", "{sweep}", "--out", "{tmp}/out"], sweep(runs=-3),
          "runs: Input should be greater than 0"),
     case("missing-seed", ["validate", "{sweep}"], sweep("seed"), "seed: Field required"),
+    # a seed beyond int64 was stored once, then made `run` again, `plan` and `replay` fail (found by an audit)
+    case("seed-beyond-int64", ["run", "{sweep}", "--out", "{tmp}/out"], sweep(seed=2**64 + 1),
+         "seed: Input should be less than or equal to 9223372036854775807"),
+    case("simulate-seed-beyond-int64", ["simulate", "--seed", str(2**63), "--out", "{tmp}/run.csv"], None,
+         "Invalid value for '--seed'"),
     case("missing-seed-and-runs", ["validate", "{sweep}"], sweep("seed", "runs"),
          "seed: Field required; runs: Field required", absent=("more problem",)),
     case("seven-problems-name-five", ["validate", "{sweep}"],
