@@ -94,12 +94,18 @@ BAD_PLUGINS = {
     "no_such_module_xyz:run": "module 'no_such_module_xyz' not found",
     "tan_plugins.dead_reckoning:nothing": "has no attribute 'nothing'",
     "tan_plugins.broken:run": "importing tan_plugins.broken failed: ZeroDivisionError",
+    # a module that ends the process, or raises a BaseException, while importing (found by an audit: exit 4 with
+    # nothing printed, or a traceback)
+    "tan_plugins.exits:run": "importing tan_plugins.exits failed: SystemExit: 4",
+    "tan_plugins.generator_exit:run": "importing tan_plugins.generator_exit failed: GeneratorExit: at import",
 }
 
 
 @pytest.mark.parametrize("name, message", sorted(BAD_PLUGINS.items()))
 def test_a_plugin_that_does_not_load_is_one_line(plugin_dir, tmp_path, name, message):
     (plugin_dir / "tan_plugins" / "broken.py").write_text("x = 1 / 0\n")
+    (plugin_dir / "tan_plugins" / "exits.py").write_text("import sys\nsys.exit(4)\n")
+    (plugin_dir / "tan_plugins" / "generator_exit.py").write_text("raise GeneratorExit('at import')\n")
     sweep = yaml.safe_load((plugin_dir / "sweep.yaml").read_text())
     sweep["methods"] = ["tight-dvl", name]
     path = tmp_path / "bad.yaml"
@@ -123,6 +129,8 @@ WRONG_OUTPUTS = {
     "os_exit_imported": ("from os import _exit\n    _exit(3)", "called os._exit(3)"),
     "keyboard_interrupt": ("raise KeyboardInterrupt", "raised KeyboardInterrupt (at wrong_keyboard_interrupt.py:2)"),
     "writes_its_inputs": ("ctx.obs.dvl_ranges[:] += 50\n    return {}", "tried to write into its inputs"),
+    # any other BaseException fails its own run, not the task's other methods (it used to lose the whole task)
+    "generator_exit": ("raise GeneratorExit('ge')", "raised GeneratorExit: ge (at wrong_generator_exit.py:2)"),
 }
 
 

@@ -181,7 +181,9 @@ def _import_method(name: str) -> MethodRecord:
     except ModuleNotFoundError as exc:
         raise TanbenchError(f"method {name!r}: module {exc.name!r} not found (is it on PYTHONPATH, "
                             f"or installed?)") from None
-    except Exception as exc:  # noqa: BLE001 - the user's module failed while importing
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - the user's module failed (or called sys.exit) while importing
         raise TanbenchError(f"method {name!r}: importing {module_name} failed: {type(exc).__name__}: {exc}") from None
     obj = module
     for part in attr.split("."):

@@ -100,6 +100,11 @@ def run_guarded(method: str, call):
             what = f"raised {type(exc).__name__}"
         raise MethodEndedProcess(f"method {method!r} {what}{_where(exc)}: a method cannot end the worker "
                                  f"process; raise an exception to fail its run") from None
+    except Exception:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - e.g. GeneratorExit, or the user's own BaseException subclass
+        raise TanbenchError(f"method {method!r} raised {type(exc).__name__}: {exc}{_where(exc)} (a BaseException: "
+                            f"raise an Exception to fail a run)") from None
     finally:
         _running.method = None
 
