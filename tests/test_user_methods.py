@@ -122,6 +122,13 @@ WRONG_OUTPUTS = {
             "'north': np.zeros(k)}", "east is not finite"),
     "key": ("k = ctx.updates.size\n    return {'east': [0.0] * k, 'north': [0.0] * k, 'speed': [0.0] * k}",
             "unknown key(s) 'speed'"),
+    # values converted silently before (found by an audit): complex, text, a reinit flag of 2.5
+    "complex": ("k = ctx.updates.size\n    return {'east': [0j] * k, 'north': [0.0] * k}",
+                "east is not real numbers (dtype complex128)"),
+    "text": ("k = ctx.updates.size\n    return {'east': ['1.0'] * k, 'north': [0.0] * k}",
+             "east is not real numbers (dtype <U3)"),
+    "reinit": ("k = ctx.updates.size\n    return {'east': [0.0] * k, 'north': [0.0] * k, 'reinit': [2.5] * k}",
+               "reinit holds flags, 0 or 1 (or booleans), not 2.5 (update 0)"),
     "raises": ("raise RuntimeError('inside the run')", "RuntimeError: inside the run"),
     # ways of ending the worker process: the run's failure, with what the method did and where
     "sys_exit": ("import sys\n    sys.exit(3)", "called sys.exit(3) (at wrong_sys_exit.py:3)"),

@@ -112,8 +112,8 @@ def as_output(name: str, value, k: int) -> MethodOutput:
     """Check a method's return value and give it as a :class:`MethodOutput`.
 
     Every problem is one :class:`TanbenchError` line naming the method and the field:
-    a wrong type, an unknown key, a wrong shape, a non-numeric or non-finite value, a
-    negative variance.
+    a wrong type, an unknown key, a wrong shape, a value that is not a real number (complex,
+    text) or not finite, a negative variance, a reinit flag other than 0 or 1.
     """
     label = f"method {name!r}"
     if isinstance(value, dict):
@@ -149,6 +149,11 @@ def as_output(name: str, value, k: int) -> MethodOutput:
             raise TanbenchError(f"{label}: {key} has negative values (first at update "
                                 f"{int(np.argmax(arrays[key] < 0))})")
     if arrays["reinit"] is not None:
+        flags = (arrays["reinit"] == 0) | (arrays["reinit"] == 1)
+        if not flags.all():
+            bad = int(np.argmax(~flags))
+            raise TanbenchError(f"{label}: reinit holds flags, 0 or 1 (or booleans), not "
+                                f"{float(arrays['reinit'][bad])!r} (update {bad})")
         arrays["reinit"] = arrays["reinit"] != 0
     return MethodOutput(**arrays, extra=extra)
 
@@ -158,8 +163,11 @@ def _series(label, key, arr, k, required, allow_nan=False):
         if required:
             raise TanbenchError(f"{label} returned no {key}")
         return None
+    raw = np.asarray(arr)
+    if raw.dtype.kind not in "biufO":  # complex, text, dates: never silently made real numbers
+        raise TanbenchError(f"{label}: {key} is not real numbers (dtype {raw.dtype})")
     try:
-        out = np.array(arr, dtype=np.float64)
+        out = np.array(raw, dtype=np.float64)
     except (TypeError, ValueError):
         raise TanbenchError(f"{label}: {key} is not numeric ({type(arr).__name__})") from None
     if out.shape != (k,):
