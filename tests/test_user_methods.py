@@ -98,7 +98,15 @@ BAD_PLUGINS = {
     # nothing printed, or a traceback)
     "tan_plugins.exits:run": "importing tan_plugins.exits failed: SystemExit: 4",
     "tan_plugins.generator_exit:run": "importing tan_plugins.generator_exit failed: GeneratorExit: at import",
+    # a plot style the figures cannot draw: refused when the record loads, not later by `plot` (found by an audit)
+    "tan_plugins.styled:BAD_COLOR": "method 'tan_plugins.styled:BAD_COLOR': color 'notacolor' is not a matplotlib",
+    "tan_plugins.styled:BAD_LINE": "method 'tan_plugins.styled:BAD_LINE': linestyle 'zz' is not one of -, --, -., :",
 }
+STYLED = """from tanbench.methods import MethodRecord
+from tan_plugins.dead_reckoning import run
+BAD_COLOR = MethodRecord(name="x", seed_id=0, run=run, summary="s", color="notacolor")
+BAD_LINE = MethodRecord(name="x", seed_id=0, run=run, summary="s", linestyle="zz")
+"""
 
 
 @pytest.mark.parametrize("name, message", sorted(BAD_PLUGINS.items()))
@@ -106,6 +114,7 @@ def test_a_plugin_that_does_not_load_is_one_line(plugin_dir, tmp_path, name, mes
     (plugin_dir / "tan_plugins" / "broken.py").write_text("x = 1 / 0\n")
     (plugin_dir / "tan_plugins" / "exits.py").write_text("import sys\nsys.exit(4)\n")
     (plugin_dir / "tan_plugins" / "generator_exit.py").write_text("raise GeneratorExit('at import')\n")
+    (plugin_dir / "tan_plugins" / "styled.py").write_text(STYLED)
     sweep = yaml.safe_load((plugin_dir / "sweep.yaml").read_text())
     sweep["methods"] = ["tight-dvl", name]
     path = tmp_path / "bad.yaml"

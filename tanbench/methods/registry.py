@@ -193,11 +193,30 @@ def _import_method(name: str) -> MethodRecord:
     return _as_record(name, obj, name)
 
 
+LINESTYLES = ("-", "--", "-.", ":")  # what the figures draw a method's lines with (MethodRecord.linestyle)
+
+
+def check_plot_style(name: str, record: MethodRecord) -> None:
+    """Refuse a record whose plot style the figures cannot draw, when it is loaded (not later, in ``plot``)."""
+    if record.linestyle not in LINESTYLES:
+        raise TanbenchError(f"method {name!r}: linestyle {record.linestyle!r} is not one of {', '.join(LINESTYLES)}")
+    if record.color is None:
+        return
+    try:
+        from matplotlib.colors import is_color_like
+    except ImportError:  # no figures without matplotlib: nothing to check the colour for
+        return
+    if not is_color_like(record.color):
+        raise TanbenchError(f"method {name!r}: color {record.color!r} is not a matplotlib colour "
+                            f"(e.g. 'tab:green' or '#1f77b4')")
+
+
 def _as_record(name: str, obj, source: str) -> MethodRecord:
     """A user's object as a record: a MethodRecord (renamed to ``name``) or a run function."""
     import dataclasses
 
     if isinstance(obj, MethodRecord):
+        check_plot_style(name, obj)
         return dataclasses.replace(obj, name=name, seed_id=user_seed_id(name), builtin=False)
     if not callable(obj):
         raise TanbenchError(f"method {name!r}: {source} is a {type(obj).__name__}, not a function or MethodRecord")
