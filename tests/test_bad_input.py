@@ -145,6 +145,15 @@ def regular_file(tmp):
     return {"out": str(tmp / "a-file")}
 
 
+def foreign_directory(tmp):
+    """A directory of the user's own files (a table of theirs, a mission log's files): `run` wrote its results beside
+    them, overwriting tables/default.md (found by an audit)."""
+    (tmp / "mine" / "tables").mkdir(parents=True)
+    (tmp / "mine" / "tables" / "default.md").write_text("my notes")
+    (tmp / "mine" / "mission.yaml").write_text("source: {vehicle: Sirius}")
+    return {"out": str(tmp / "mine")}
+
+
 def case(id, args, data, *fragments, setup=None, hang_s=240, code=2, then=None, absent=()):
     """One row: CLI ``args``, the sweep file's ``data``, text the output must hold (``fragments``)
     and must not (``absent``)."""
@@ -278,6 +287,8 @@ CASES = [
          setup=unwritable_output),
     case("output-is-a-regular-file", ["run", "{sweep}", "--out", "{out}"], BASE,
          "output directory {tmp}/a-file is a file, not a directory", setup=regular_file),
+    case("output-holds-a-users-files", ["run", "{sweep}", "--out", "{out}"], BASE,
+         "holds files that are not a tanbench results directory's (e.g. 'mission.yaml')", setup=foreign_directory),
     case("plan-output-is-a-regular-file", ["plan", "{sweep}", "--out", "{out}"], BASE,
          "output directory {tmp}/a-file is a file, not a directory", setup=regular_file),
     # names that become paths (results/<sweep>, DIR/tables/<table>.parquet)

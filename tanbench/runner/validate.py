@@ -150,6 +150,10 @@ def validate_worlds(sweep: Sweep) -> None:
                                 f"check its sensors.*, trajectory.* and duration_s settings") from None
 
 
+# what a results directory holds from its first stored run on (or a run stopped before it: the work area, the lock)
+RESULTS_MARKERS = frozenset({"sweep.yaml", "runs", "sessions.jsonl", ".work", ".tanbench.lock"})
+
+
 def check_output(sweep: Sweep, out: Path) -> None:
     """``out`` names a directory that is not inside another results directory, and every file
     a sweep writes there has a name and a path the file system takes."""
@@ -158,6 +162,12 @@ def check_output(sweep: Sweep, out: Path) -> None:
     resolved = Path(os.path.abspath(out))
     if (resolved / "replay.yaml").is_file():  # tanbench replay's output (missions/replay.py), which refuses ours too
         raise TanbenchError(f"--out {out}: holds a replay's results (replay.yaml); use another directory")
+    if resolved.is_dir():
+        names = {p.name for p in resolved.iterdir()}
+        foreign = sorted(n for n in names if not n.startswith("."))
+        if foreign and not names & RESULTS_MARKERS:  # e.g. a mission log, or results/ itself: never written into
+            raise TanbenchError(f"--out {out}: holds files that are not a tanbench results directory's (e.g. "
+                                f"{foreign[0]!r}); give a new or empty directory")
     for parent in resolved.parents:
         if (parent / "sweep.yaml").is_file() and ((parent / "runs").is_dir() or (parent / "tables").is_dir()):
             raise TanbenchError(f"--out {out} is inside the results directory {parent}: give the sweep a directory "
