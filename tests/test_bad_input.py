@@ -255,6 +255,7 @@ CASES = [
          "nothere.npy: file not found"),
     case("garbage-tif", ["validate", "{sweep}"], file_sweep("{maps}/garbage.tif"),
          "garbage.tif: not a readable TIFF file"),
+    case("truncated-tif", ["terrain", "info", "{maps}/truncated.tif"], None, "truncated.tif: not a readable TIFF file"),
     case("text-file-named-npy", ["validate", "{sweep}"], file_sweep("{maps}/text.npy"),
          "text.npy: not a numeric NumPy array file (object/pickled data is refused)", absent=("allow_pickle",)),
     case("map-path-is-a-directory", ["validate", "{sweep}"], file_sweep("{maps}/a-directory.npy"),
@@ -621,6 +622,9 @@ def maps(tmp_path_factory):
     holes[(nn >= 480) & (nn <= 520) & (ee >= 430) & (ee <= 470)] = np.nan  # on the first leg (E = 450 m)
     np.save(d / "holes.npy", holes)
     (d / "garbage.tif").write_bytes(b"\x00 this is not a TIFF \xff" * 40)
+    import tifffile
+    tifffile.imwrite(d / "whole.tif", z.astype(np.float32))
+    (d / "truncated.tif").write_bytes((d / "whole.tif").read_bytes()[:200])  # tifffile logged 9 lines of its own
     (d / "map.xyz").write_text("0 0 -60\n5 0 -61\n")
     (d / "text.npy").write_text("hello")
     (d / "a-directory.npy").mkdir()

@@ -98,3 +98,13 @@ def test_mc_bounds_are_scipy_stats_numbers():
         lo, hi = mc_bounds(n, 2, level)
         np.testing.assert_array_equal(lo, stats.chi2.ppf(a, 2 * n) / n)
         np.testing.assert_array_equal(hi, stats.chi2.ppf(1 - a, 2 * n) / n)
+
+
+def test_nees_of_a_wild_method_is_inf_or_nan_without_a_warning():
+    """A plug-in's estimates near 1e300 made numpy print an overflow warning line (found by an audit)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = nees(np.array([1e300, 1.0]), np.array([1.0, 1.0]), np.array([1e300, 1.0]), np.array([1e300, 1.0]))
+    assert not np.isfinite(out[0]) and out[1] == 2.0

@@ -51,8 +51,8 @@ def nees(err_e, err_n, var_e, var_n, cov_en=None) -> np.ndarray:
     err_e, err_n = np.asarray(err_e, float), np.asarray(err_n, float)
     var_e, var_n = np.asarray(var_e, float), np.asarray(var_n, float)
     c = np.zeros_like(var_e) if cov_en is None else np.nan_to_num(np.asarray(cov_en, float), nan=0.0)
-    det = var_e * var_n - c * c
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a wild method's inf is its NEES
+        det = var_e * var_n - c * c
         out = (var_n * err_e**2 - 2 * c * err_e * err_n + var_e * err_n**2) / det
     return np.where((det > 0) & (var_e > 0), out, np.nan)
 

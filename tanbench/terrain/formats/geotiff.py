@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,9 @@ def read_geotiff(path: Path) -> RawGrid:
             f"{path}: reading GeoTIFF needs the tifffile package: pip install tifffile "
             f"(or pip install tanbench[maps])"
         ) from None
+    log = logging.getLogger("tifffile")
+    level = log.level
+    log.setLevel(logging.CRITICAL + 1)  # tifffile logs what it finds wrong; the one line below says it
     try:
         with tifffile.TiffFile(path) as tif:
             page = tif.pages[0]
@@ -29,6 +33,8 @@ def read_geotiff(path: Path) -> RawGrid:
             z = page.asarray()
     except Exception as exc:
         raise TanbenchError(f"{path}: not a readable TIFF file ({type(exc).__name__}: {exc})") from None
+    finally:
+        log.setLevel(level)
     z = np.asarray(z)
     if z.ndim == 3 and 1 in (z.shape[0], z.shape[-1]):
         z = z.reshape(z.shape[1:] if z.shape[0] == 1 else z.shape[:2])
