@@ -217,8 +217,9 @@ def position_reset_numpy(p_kf, r, nav, zt):
 def reopen_kf(p_kf, p0_pos, p0_yaw):
     """Recovery of a locked-out navigation KF (``kf.misses`` fixes rejected in a row: the
     healthy terrain PF and the KF disagree persistently, so the KF is the overconfident
-    one): position variances back to the initial ones, heading variance to at least a
-    quarter of the initial (half its std), their correlations dropped; the bias keeps its own."""
+    one): position variances back to the initial ones, heading variance to a quarter of
+    the initial (half its std; a larger one shrinks to it), their correlations dropped; the bias
+    keeps its own."""
     for i in range(N_ERROR):
         if i != EB:
             for j in range(N_ERROR):
