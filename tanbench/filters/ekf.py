@@ -172,7 +172,9 @@ def iekf_update(x, p, offsets_k, up, zmap, res, sig_u, iterations, gate):
 
 
 def iekf_update_numpy(x, p, offsets_k, up, zmap, res, sig_u, iterations, gate):
-    """Plain-numpy reference of :func:`iekf_update`: returns (x, p, nis, used)."""
+    """Plain-numpy reference of :func:`iekf_update`: returns (x, p, nis, used). A beam is used when it has a
+    range and its five map heights (:func:`terrain_slope_numpy`) are on the map, whatever its slope: one on
+    a level patch of map (a Jacobian row of zeros) still counts, as in the kernel."""
     z, e0, n0, inv_re, inv_rn = zmap
     x0 = x.copy()
     xi = x.copy()
@@ -180,9 +182,11 @@ def iekf_update_numpy(x, p, offsets_k, up, zmap, res, sig_u, iterations, gate):
     ok = ~np.isnan(offsets_k[:, 2])
     gain = None
     nis = -1.0
+    used = 0
     for it in range(iterations):
         c, s = math.cos(xi[2]), math.sin(xi[2])
         rows, resid, rvar = [], [], []
+        used = 0
         for o in offsets_k[ok]:
             qe, qn = xi[0] + c * o[0] - s * o[1], xi[1] + s * o[0] + c * o[1]
             h, ge, gn, curv = terrain_slope_numpy(z, e0, n0, inv_re, inv_rn, qe, qn, step)
@@ -191,22 +195,23 @@ def iekf_update_numpy(x, p, offsets_k, up, zmap, res, sig_u, iterations, gate):
                 resid.append(0.0)
                 rvar.append(1.0)
                 continue
+            used += 1
             rows.append([-ge, -gn, -(ge * (-s * o[0] - c * o[1]) + gn * (c * o[0] - s * o[1])), 0.0])
             resid.append(up + o[2] - h)
             rvar.append(sig_u**2 + curv**2)
-        hm = np.array(rows).reshape(-1, 4)
-        if not np.any(hm):
+        if used == 0:
             return x, p, -1.0, 0
+        hm = np.array(rows).reshape(-1, 4)
         sm = hm @ p @ hm.T + np.diag(rvar)
         v = np.array(resid) + hm @ (x0 - xi)
         if it == 0:
             nis = v @ np.linalg.solve(sm, v)
             if nis > gate:
-                return x, p, nis, int(np.any(hm, axis=1).sum())
+                return x, p, nis, used
         gain = p @ hm.T @ np.linalg.inv(sm)
         xi = x0 - gain @ v
     pn = (np.eye(4) - gain @ hm) @ p
-    return xi, 0.5 * (pn + pn.T), nis, int(np.any(hm, axis=1).sum())
+    return xi, 0.5 * (pn + pn.T), nis, used
 
 
 @nb.njit(cache=True)

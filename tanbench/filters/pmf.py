@@ -107,12 +107,16 @@ def blur_separable(p, sigma_cells, scratch):
 
 
 def blur_separable_numpy(p, sigma_cells):
+    """Plain-numpy reference of :func:`blur_separable` (returns a new array). The centred part of the full
+    convolutions (``mode="same"`` returns the longer of grid and kernel: a kernel of more taps than the grid
+    has nodes, which the kernel allows, would have given an array of the wrong size)."""
     r = max(1, int(math.ceil(3.0 * sigma_cells)))
     t = np.arange(-r, r + 1)
     k = np.exp(-0.5 * (t / sigma_cells) ** 2) if sigma_cells > 0 else (t == 0).astype(float)
     k = k / k.sum()
-    rows = np.array([np.convolve(row, k, mode="same") for row in p])
-    return np.array([np.convolve(col, k, mode="same") for col in rows.T]).T
+    n0, n1 = np.shape(p)
+    rows = np.array([np.convolve(row, k)[r:r + n1] for row in p])
+    return np.array([np.convolve(col, k)[r:r + n0] for col in rows.T]).T
 
 
 @nb.njit(cache=True)

@@ -406,6 +406,18 @@ def regularise(x, rng, kind, rows, size, dim):
         roughen(x, rows, size, dim, noise)
 
 
+def regularise_numpy(x, draw, kind, rows, size, dim):
+    """Plain-numpy reference of :func:`regularise` (returns a new array): the jitter's (len(rows), M)
+    normals from ``draw(n, normal)``, the kernel's generator's next numbers (``rng.fills_numpy``)."""
+    x = np.array(x, dtype=float)
+    if kind == REG_NONE:
+        return x
+    noise = draw(np.shape(rows)[0] * x.shape[1], True).reshape(np.shape(rows)[0], x.shape[1])
+    if kind == REG_LIU_WEST:
+        return shrink_jitter_numpy(x, rows, size, noise)
+    return roughen_numpy(x, rows, size, dim, noise)
+
+
 @nb.njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _shift_log_weights(logw):
     mx = max_log_weight(logw)
@@ -452,10 +464,7 @@ def resample_and_regularise_numpy(x, w, logw, ess, draw, rs, dim, spread):
         return x, logw
     uniforms = draw(1 if rs.scheme == SYSTEMATIC else m, False)
     x = x[:, resample_indices_numpy(rs.scheme, w, uniforms)]
-    if rs.kind != REG_NONE:
-        noise = draw(rs.cols.size * m, True).reshape(rs.cols.size, m)
-        x = (shrink_jitter_numpy(x, rs.cols, rs.size, noise) if rs.kind == REG_LIU_WEST
-             else roughen_numpy(x, rs.cols, rs.size, dim, noise))
+    x = regularise_numpy(x, draw, rs.kind, rs.cols, rs.size, dim)
     if spread < rs.min_spread:
         x[:2] += rs.min_spread / math.sqrt(2.0) * draw(2 * m, True).reshape(2, m)
     return x, np.zeros_like(logw)

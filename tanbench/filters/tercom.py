@@ -170,6 +170,18 @@ def _best(surface):
     return b, bd, bi, bj
 
 
+def best_numpy(surface):
+    """Plain-numpy reference of :func:`_best`: (the smallest value, its index d, i, j), the first in C order;
+    (inf, 0, 0, 0) when no value is below inf (NaN passed over)."""
+    flat = np.asarray(surface, dtype=float).ravel()
+    flat = np.where(np.isnan(flat), np.inf, flat)
+    at = int(np.argmin(flat))
+    if not flat[at] < np.inf:
+        return np.inf, 0, 0, 0
+    d, i, j = np.unravel_index(at, np.shape(surface))
+    return float(flat[at]), int(d), int(i), int(j)
+
+
 @nb.njit(cache=True)
 def _collect(buf_e, buf_n, buf_h, count, pe, pn, ph):
     """Valid profile points of the ring buffer (rows of beams) into pe, pn, ph; returns their number."""
@@ -182,6 +194,13 @@ def _collect(buf_e, buf_n, buf_h, count, pe, pn, ph):
                 ph[npts] = buf_h[k, i]
                 npts += 1
     return npts
+
+
+def collect_numpy(buf_e, buf_n, buf_h, count):
+    """Plain-numpy reference of :func:`_collect`: the profile points (pe, pn, ph) of the buffers' first
+    ``count`` rows whose height is not NaN, row by row."""
+    ok = ~np.isnan(buf_h[:count])
+    return buf_e[:count][ok], buf_n[:count][ok], buf_h[:count][ok]
 
 
 @nb.njit(cache=True)
