@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 
@@ -14,3 +16,11 @@ def read_only(arr: np.ndarray) -> np.ndarray:
     sometimes views of read-only data (a method's inputs) and sometimes fresh arrays would
     compile every kernel twice (docs/speed.md, "Compiling one signature per kernel")."""
     return np.asarray(memoryview(arr).toreadonly())
+
+
+def physical_memory() -> int | None:
+    """This machine's memory in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None

@@ -547,6 +547,11 @@ def terrain_stats(
             typer.echo(line)
 
 
+def _metres(value: float) -> str:
+    """An elevation for ``terrain info``: one decimal, or 6 significant digits past 1e9 m (absurd, but shown)."""
+    return f"{value:.1f}" if abs(value) < 1e9 else f"{value:.6g}"
+
+
 @terrain_app.command("info", help="A map's nodes, spacing, extent in tanbench's frame (where a trajectory's "
                      "start_en_m or centre_en_m goes) and elevations, as a sweep's terrain reads it."
                      + EXAMPLE.format("tanbench terrain info '../shared/data/monterey/MontereyBay.R_*.tif'"))
@@ -594,9 +599,15 @@ def terrain_info(
             lon, lat = local_to_lonlat(m, [m.e0, m.e_max], [m.n0, m.n_max])
             where = f" (E {m.e0:.1f}, N {m.n0:.1f} m is lon {lon[0]:.5f}, lat {lat[0]:.5f}; E {m.e_max:.1f}, " \
                     f"N {m.n_max:.1f} m is lon {lon[1]:.5f}, lat {lat[1]:.5f})"
+        low, high = finite.min(), finite.max()
+        with np.errstate(over="ignore", invalid="ignore"):
+            mean = finite.mean()
+            if not np.isfinite(mean):  # the sum overflowed (elevations near the float limit): a scaled mean
+                top = max(abs(low), abs(high))
+                mean = np.mean(finite / top) * top
         typer.echo(f"{m.name or spec.kind}: {nx} x {ny} nodes at {m.res_e:.2f} x {m.res_n:.2f} m; "
                    f"E {m.e0:.1f} .. {m.e_max:.1f} m, N {m.n0:.1f} .. {m.n_max:.1f} m; elevation (up positive) "
-                   f"{finite.min():.1f} .. {finite.max():.1f} m, mean {finite.mean():.1f}; "
+                   f"{_metres(low)} .. {_metres(high)} m, mean {_metres(mean)}; "
                    f"{m.z.size - finite.size} holes; frame {frames.get(frame, frame)}{where}")
     typer.echo("E and N are the frame of a trajectory's start_en_m and centre_en_m (docs/maps.md).")
 

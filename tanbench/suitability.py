@@ -241,8 +241,14 @@ def track_summary(result: Suitability, tracks) -> list[dict]:
     for label, pos in tracks:
         vals = result.along(pos[:, 0], pos[:, 1])
         rows.append({"track": label, "points": int(pos.shape[0]),
-                     **{f"mean_{k}": float(np.nanmean(v)) for k, v in vals.items()}})
+                     **{f"mean_{k}": _nan_mean(v) for k, v in vals.items()}})
     return rows
+
+
+def _nan_mean(v: np.ndarray) -> float:
+    """Mean of the values that are not NaN; NaN (no warning) where every value is."""
+    v = v[~np.isnan(v)]
+    return float(v.mean()) if v.size else float("nan")
 
 
 def plot_suitability(result: Suitability, tracks, path) -> None:
@@ -258,11 +264,17 @@ def plot_suitability(result: Suitability, tracks, path) -> None:
     fig, axes = plt.subplots(2, 2, figsize=(11, 2 * 5.5 * aspect + 1.5), squeeze=False)
     for ax, (name, title, cmap) in zip(axes.ravel(), panels):
         v = result.layers[name]
-        if name == "predicted_std_m":
+        shown = v[np.isfinite(v)]  # the colour scale's values; a layer may have none (a 2 x 2 map has no slope)
+        if not shown.size:
+            im = None
+            ax.set_xlim(extent[:2])
+            ax.set_ylim(extent[2:])
+            ax.text(0.5, 0.5, "undefined on this map", transform=ax.transAxes, ha="center", va="center", fontsize=8)
+        elif name == "predicted_std_m":
             im = ax.imshow(v, origin="lower", extent=extent, cmap=cmap,
-                           norm=matplotlib.colors.LogNorm(vmin=max(np.nanmin(v), 1e-3), vmax=np.nanmax(v)))
+                           norm=matplotlib.colors.LogNorm(vmin=max(shown.min(), 1e-3), vmax=shown.max()))
         else:
-            im = ax.imshow(v, origin="lower", extent=extent, cmap=cmap, vmax=np.nanpercentile(v, 99))
+            im = ax.imshow(v, origin="lower", extent=extent, cmap=cmap, vmax=np.percentile(shown, 99))
         for label, pos in tracks:
             ax.plot(pos[:, 0], pos[:, 1], lw=0.9, color="white")
             ax.plot(pos[:, 0], pos[:, 1], lw=0.5, color="red", label=label)
@@ -270,7 +282,8 @@ def plot_suitability(result: Suitability, tracks, path) -> None:
         ax.set_xlabel("east (m)", fontsize=8)
         ax.set_ylabel("north (m)", fontsize=8)
         ax.tick_params(labelsize=7)
-        fig.colorbar(im, ax=ax, shrink=0.8)
+        if im is not None:
+            fig.colorbar(im, ax=ax, shrink=0.8)
     fig.suptitle(f"{g.name}: {result.sensor.upper()} at {result.altitude_m:.0f} m altitude", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -552,6 +552,92 @@ READER_CASES = [
 ]
 CASES += READER_CASES
 
+
+# ---- map files the readers must refuse (or read quietly): headers, non-finite georeferencing, NetCDF --------
+
+
+def broken_maps(tmp):
+    """Map files, 1 km x 1 km at MAP_RES nodes unless said, each broken in one way (or extreme but readable)."""
+    from scipy.io import netcdf_file
+
+    z = _seafloor_1km()
+    n = z.shape[0]
+    header = {"ncols": n, "nrows": n, "xllcorner": -2.5, "yllcorner": -2.5, "cellsize": MAP_RES}
+    for name, change in (("ncols-nan", {"ncols": "nan"}), ("ncols-fraction", {"ncols": "100.7"}),
+                         ("nrows-negative", {"nrows": -100}), ("xllcorner-nan", {"xllcorner": "nan"}),
+                         ("cellsize-inf", {"cellsize": "inf"})):
+        lines = [f"{k} {v}" for k, v in {**header, **change}.items()]
+        (tmp / f"{name}.asc").write_text("\n".join(lines + [" ".join(f"{v:.3f}" for v in row) for row in z[::-1]]))
+    np.savez(tmp / "e0-nan.npz", z=z, e0=np.nan, n0=0.0, res_e=MAP_RES, res_n=MAP_RES)
+    np.savez(tmp / "e0-inf.npz", z=z, e0=np.inf, n0=0.0, res_e=MAP_RES, res_n=MAP_RES)
+    huge = np.full(z.shape, -1e307)  # elevations whose sum overflows
+    huge[0, 0] = -1.5e307
+    np.savez(tmp / "huge.npz", z=huge, e0=0.0, n0=0.0, res_e=MAP_RES, res_n=MAP_RES)
+    np.savez(tmp / "two-by-two.npz", z=z[:2, :2], e0=0.0, n0=0.0, res_e=MAP_RES, res_n=MAP_RES)
+    coords = np.arange(n) * MAP_RES
+    for name in ("char-x", "scale-inf"):
+        with netcdf_file(tmp / f"{name}.nc", "w") as nc:
+            nc.createDimension("x", n)
+            nc.createDimension("y", n)
+            if name == "char-x":
+                nc.createVariable("x", "S1", ("x",))[:] = np.array([b"a"] * n)
+            else:
+                nc.createVariable("x", "f8", ("x",))[:] = coords
+            nc.createVariable("y", "f8", ("y",))[:] = coords
+            v = nc.createVariable("z", "i2", ("y", "x"))
+            v[:] = np.round(z * 100).astype(np.int16)
+            if name == "scale-inf":
+                v.scale_factor = np.float64(np.inf)
+    return {"bm": tmp}
+
+
+def quiet(*files):
+    """A ``then=`` check of a command that succeeds: nothing on stderr (no numpy warning), ``files`` written."""
+    def check(tmp, proc):
+        assert proc.stderr == "", proc.stderr
+        for name in files:
+            assert (tmp / name).is_file(), name
+    return check
+
+
+BROKEN_MAP_CASES = [
+    case("asc-ncols-nan", ["terrain", "info", "{bm}/ncols-nan.asc"], None,
+         "ncols-nan.asc: ncols must be a positive whole number (got nan)", setup=broken_maps),
+    case("asc-ncols-not-whole", ["terrain", "info", "{bm}/ncols-fraction.asc"], None,
+         "ncols-fraction.asc: ncols must be a positive whole number (got 100.7)", setup=broken_maps),
+    case("asc-nrows-negative-in-a-sweep", ["validate", "{sweep}"],
+         no_georeferencing_arguments(file_sweep("{bm}/nrows-negative.asc")), "bad.yaml: cell",
+         "nrows-negative.asc: nrows must be a positive whole number (got -100)", setup=broken_maps),
+    case("asc-xllcorner-nan-in-a-sweep", ["validate", "{sweep}"],
+         no_georeferencing_arguments(file_sweep("{bm}/xllcorner-nan.asc")), "bad.yaml: cell",
+         "xllcorner-nan.asc: xllcorner must be finite (got nan)", setup=broken_maps, absent=("trajectory",)),
+    case("asc-cellsize-inf", ["terrain", "info", "{bm}/cellsize-inf.asc"], None,
+         "cellsize-inf.asc: cellsize must be a positive finite number (got inf)", setup=broken_maps),
+    case("npz-e0-nan", ["terrain", "info", "{bm}/e0-nan.npz"], None,
+         "e0-nan.npz: .npz key e0 must be finite, got nan", setup=broken_maps),
+    case("npz-e0-inf-in-a-run", ["run", "{sweep}", "--out", "{tmp}/out"],
+         no_georeferencing_arguments(file_sweep("{bm}/e0-inf.npz")), "bad.yaml: cell",
+         "e0-inf.npz: .npz key e0 must be finite, got inf", setup=broken_maps, absent=("trajectory",)),
+    case("netcdf-character-coordinate", ["terrain", "info", "{bm}/char-x.nc"], None,
+         "char-x.nc: coordinate x is not numeric (it holds S1 values)", setup=broken_maps),
+    case("netcdf-scale-factor-inf", ["terrain", "info", "{bm}/scale-inf.nc"], None,
+         "scale-inf.nc: the grid holds no valid elevation once unpacked: z:scale_factor inf and add_offset 0 "
+         "make every value non-finite", setup=broken_maps),
+    case("resample-too-fine", ["validate", "{sweep}"], file_sweep(scenario__terrain__resample_m=0.01),
+         "bad.yaml: cell", "terrain.resample_m (0.01 m) resamples the 1000 x 1000 m grid onto 100001 x 100001 "
+         "nodes (1e+10), more than the ", "use a coarser resample_m (at least ", absent=("sensors.",)),
+    # extreme but readable: the numbers as they are, no numpy warning
+    case("terrain-info-elevations-near-the-float-limit", ["terrain", "info", "{bm}/huge.npz"], None,
+         "huge.npz: 201 x 201 nodes at 5.00 x 5.00 m;",
+         "elevation (up positive) -1.5e+307 .. -1e+307 m, mean -1.00001e+307;",
+         setup=broken_maps, code=0, then=quiet()),
+    case("suitability-of-a-two-by-two-map",
+         ["terrain", "suitability", "{bm}/two-by-two.npz", "--out", "{tmp}/suit"], None,
+         "two-by-two: 2 x 2 nodes, dvl at 30.0 m altitude", setup=broken_maps, code=0,
+         then=quiet("suit/two-by-two-dvl.png", "suit/two-by-two-dvl-slope_std_deg.tif")),
+]
+CASES += BROKEN_MAP_CASES
+
 MBE = {"multibeam_beams": 16}
 CASES += [
     # the multibeam (issue 28): a row per new setting, checked before anything runs
@@ -736,7 +822,9 @@ def test_usage_errors_are_one_line_too(tmp_path, maps):
     sweep(scenario__duration_s=0.001),
     sweep(scenario__duration_s=None, scenario__sampling_time_s=100000, scenario__map_resolution_m=20),
     file_sweep(scenario__filter__initial_area_m=2000),
-], ids=["noise-inf", "duration-0.001", "sampling-longer-than-the-run", "initial-uncertainty-off-the-map"])
+    file_sweep(scenario__terrain__resample_m=0.01),
+], ids=["noise-inf", "duration-0.001", "sampling-longer-than-the-run", "initial-uncertainty-off-the-map",
+        "resample-too-fine"])
 def test_validate_refuses_what_run_refuses(tmp_path, maps, data):
     """`validate` and `run` give the same one error line (run before any task, storing nothing)."""
     argv = prepare(tmp_path, maps, ["validate", "{sweep}"], data, None)

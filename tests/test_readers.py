@@ -213,6 +213,56 @@ def test_netcdf_packed_values_and_fill(tmp_path):
     np.testing.assert_allclose(m.z[ok], Z[ok], atol=scale / 2 + 1e-9)
 
 
+def test_netcdf_values_not_finite_once_unpacked_are_holes(tmp_path):
+    """scale_factor / add_offset are applied to finite packed values only; what overflows is a hole,
+    and a grid that unpacks to no finite value at all is refused in one line (no numpy warning)."""
+    path = tmp_path / "overflow.nc"
+    packed = np.where(np.arange(NX)[None, :] < 5, 100.0, 1.0) * np.ones((NY, 1))  # 100 * 1e307 overflows
+    with np.errstate(all="raise"):
+        write_nc(path, E, N, packed, z_attrs={"scale_factor": np.float64(1e307)})
+        m = read_grid(path)
+    assert np.isnan(m.z[:, :5]).all() and (m.z[:, 5:] == 1e307).all()
+    assert m.meta["nodata_nodes"] == 5 * NY
+    for attrs in ({"scale_factor": np.float64(np.inf)}, {"add_offset": np.float64(np.nan)},
+                  {"scale_factor": np.float64(1e307), "add_offset": np.float64(1.75e308)}):
+        write_nc(path, E, N, packed, z_attrs=attrs)
+        with np.errstate(all="raise"):
+            msg = raises_naming(path, read_grid, path, match="the grid holds no valid elevation once unpacked")
+        assert "make every value non-finite" in msg, msg
+
+
+def test_netcdf_fill_value_the_type_cannot_hold_matches_nothing(tmp_path):
+    """A _FillValue outside the packed integers' range (1e10 for int16) masks nothing, without a numpy
+    cast warning; a 64-bit integer fill compares exactly."""
+    path = tmp_path / "fill.nc"
+    packed = np.round((Z - Z.min()) * 100).astype(np.int16)
+    with np.errstate(invalid="ignore"):  # scipy's writer casts the fill itself
+        write_nc(path, E, N, packed, dtype="i2", z_attrs={"_FillValue": np.float64(1e10)})
+    with np.errstate(all="raise"):
+        m = read_grid(path)
+    assert not np.isnan(m.z).any()
+    from tanbench.terrain.formats.netcdf import _packed_equal
+
+    big = np.array([2**62 + 1, 2**62], dtype=np.int64)
+    assert _packed_equal(big, np.int64(2**62)).tolist() == [False, True]  # as floats, both would match
+    assert not _packed_equal(packed, np.float64(0.5)).any() and not _packed_equal(packed, np.nan).any()
+
+
+@pytest.mark.parametrize("which", ["x", "y"])
+def test_netcdf_character_coordinate_is_refused(tmp_path, which):
+    path = tmp_path / "chars.nc"
+    with netcdf_file(path, "w") as nc:
+        nc.createDimension("x", NX)
+        nc.createDimension("y", NY)
+        for name, values in (("x", E), ("y", N)):
+            if name == which:  # digits as characters: '1' would convert, 'a' would not; neither is a coordinate
+                nc.createVariable(name, "S1", (name,))[:] = np.array([b"1"] * (len(values) - 1) + [b"a"])
+            else:
+                nc.createVariable(name, "f8", (name,))[:] = values
+        nc.createVariable("z", "f8", ("y", "x"))[:] = Z
+    raises_naming(path, read_grid, path, match=f"coordinate {which} is not numeric (it holds S1 values)")
+
+
 def test_netcdf_z_stored_as_x_by_y(tmp_path):
     path = tmp_path / "transposed.nc"
     with netcdf_file(path, "w") as nc:
@@ -341,6 +391,57 @@ def test_esri_ascii_dx_dy_and_errors(tmp_path):
     raises_naming(bad, read_grid, bad, match="values")
 
 
+@pytest.mark.parametrize("key, value", [("ncols", "nan"), ("ncols", "inf"), ("ncols", "-100"), ("ncols", "0"),
+                                        ("ncols", "100.7"), ("ncols", "23.0000001"), ("nrows", "nan"),
+                                        ("nrows", "-17")])
+def test_esri_ascii_counts_must_be_positive_whole_numbers(tmp_path, key, value):
+    """ncols / nrows: no truncation (100.7 is not 100), no crash on nan or inf, no negative counts."""
+    path = tmp_path / "counts.asc"
+    header = {"ncols": NX, "nrows": NY, "xllcenter": E0, "yllcenter": N0, "cellsize": RE, key: value}
+    write_asc(path, Z[::-1], header)
+    raises_naming(path, read_grid, path, match=f"{key} must be a positive whole number (got {value})")
+
+
+def test_esri_ascii_both_counts_negative_is_named(tmp_path):
+    """-17 x -23 multiplies to the right number of values: still the header's fault, and said so."""
+    path = tmp_path / "negative.asc"
+    write_asc(path, Z[::-1], {"ncols": -NX, "nrows": -NY, "xllcenter": E0, "yllcenter": N0, "cellsize": RE})
+    raises_naming(path, read_grid, path, match=f"ncols must be a positive whole number (got -{NX})")
+    write_asc(path, Z[::-1], {"ncols": f"{NX}.0", "nrows": NY, "xllcenter": E0, "yllcenter": N0, "cellsize": RE})
+    assert read_grid(path).shape == (NY, NX)  # a whole number written with a decimal point is fine
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("xllcenter", "nan", "xllcenter must be finite (got nan)"),
+    ("yllcenter", "-inf", "yllcenter must be finite (got -inf)"),
+    ("cellsize", "inf", "cellsize must be a positive finite number (got inf)"),
+    ("cellsize", "nan", "cellsize must be a positive finite number (got nan)"),
+    ("cellsize", "-5", "cellsize must be a positive finite number (got -5)"),
+])
+def test_esri_ascii_georeferencing_must_be_finite(tmp_path, key, value, match):
+    path = tmp_path / "georef.asc"
+    header = {"ncols": NX, "nrows": NY, "xllcenter": E0, "yllcenter": N0, "cellsize": RE, key: value}
+    write_asc(path, Z[::-1], header)
+    raises_naming(path, read_grid, path, match=match)
+    corner = tmp_path / "corner.asc"
+    write_asc(corner, Z[::-1], {"ncols": NX, "nrows": NY, "xllcorner": "inf", "yllcorner": N0, "dx": RE, "dy": RN})
+    raises_naming(corner, read_grid, corner, match="xllcorner must be finite (got inf)")
+    write_asc(corner, Z[::-1], {"ncols": NX, "nrows": NY, "xllcorner": E0, "yllcorner": N0, "dx": RE, "dy": "inf"})
+    raises_naming(corner, read_grid, corner, match="dy must be a positive finite number (got inf)")
+
+
+def test_esri_ascii_non_finite_data_are_holes(tmp_path):
+    """nan / inf among the values are holes, as in every other format (not infinite elevations)."""
+    path = tmp_path / "holes.asc"
+    lines = [f"ncols {NX}", f"nrows {NY}", f"xllcenter {E0}", f"yllcenter {N0}", f"dx {RE}", f"dy {RN}"]
+    rows = [[f"{v:.10f}" for v in row] for row in Z[::-1]]
+    rows[0][0], rows[0][1], rows[1][0] = "inf", "-inf", "nan"  # the north-west corner
+    path.write_text("\n".join(lines + [" ".join(r) for r in rows]) + "\n")
+    m = read_grid(path)
+    assert np.isnan(m.z[-1, :2]).all() and np.isnan(m.z[-2, 0]) and m.meta["nodata_nodes"] == 3
+    assert np.isfinite(m.z).sum() == m.z.size - 3
+
+
 # --------------------------------------------------------------------------- npy / npz
 
 
@@ -366,6 +467,44 @@ def test_npz_keys_and_single_array(tmp_path):
     partial = tmp_path / "partial.npz"
     np.savez(partial, z=Z, res_e=RE, res_n=RN)
     assert_plane(read_grid(partial, origin=(E0, N0)))
+
+
+@pytest.mark.parametrize("key, value", [("e0", np.nan), ("e0", np.inf), ("n0", -np.inf), ("res_e", np.inf),
+                                        ("res_n", np.nan)])
+def test_npz_georeferencing_keys_must_be_finite(tmp_path, key, value):
+    """A non-finite origin or spacing is the file's fault, said by the reader (not a map at E nan .. nan m)."""
+    path = tmp_path / "nonfinite.npz"
+    np.savez(path, **{"z": Z, "e0": E0, "n0": N0, "res_e": RE, "res_n": RN, key: value})
+    raises_naming(path, read_grid, path, match=f".npz key {key} must be finite, got {value}")
+
+
+def test_georeferencing_that_overflows_is_refused(tmp_path):
+    """Finite origin and spacing whose far corner overflows (from any reader or the arguments): one line."""
+    path = tmp_path / "far.npy"
+    np.save(path, Z)
+    msg = raises_naming(path, read_grid, path, origin=(1.7e308, 0.0), resolution=(1e307, RN),
+                        match="the georeferencing (arguments) is not finite")
+    assert "far corner (inf, " in msg, msg
+
+
+def test_a_reader_giving_inf_heights_gets_holes(tmp_path):
+    """A (plug-in) reader that hands over inf elevations: holes, as the built-in readers make them."""
+    from tanbench.terrain.formats import RawGrid, register_format
+    from tanbench.terrain.formats.registry import FORMATS
+
+    def read_inf(path):
+        z = Z.copy()
+        z[2, 3], z[4, 5] = np.inf, -np.inf
+        return RawGrid(z, georef="keys", x0=E0, y0=N0, dx=RE, dy=RN, crs="metric")
+
+    register_format("inf-test", (".inftest",), read_inf)
+    try:
+        (tmp_path / "g.inftest").write_text("")
+        m = read_grid(tmp_path / "g.inftest")
+    finally:
+        FORMATS.pop("inf-test")
+    assert np.isnan(m.z[2, 3]) and np.isnan(m.z[4, 5]) and m.meta["nodata_nodes"] == 2
+    assert not np.isinf(m.z).any()
 
 
 def test_npy_without_georeferencing_is_an_error(tmp_path):

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tanbench.arrays import physical_memory
 from tanbench.errors import TanbenchError, describe_exception
 from tanbench.methods.api import check_start_on_map
 from tanbench.methods.registry import get
@@ -81,14 +82,6 @@ def check_methods(sweep: Sweep) -> None:
                 record.parse_options(cell.scenario)
             except TanbenchError as exc:
                 raise TanbenchError(f"{_cell_label(sweep, cell)}: {exc}") from None
-
-
-def physical_memory() -> int | None:
-    """This machine's memory in bytes (None where the system does not say)."""
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def check_memory(cell: Cell, duration_s: float) -> None:

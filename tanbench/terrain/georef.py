@@ -107,6 +107,16 @@ def georeference(raw: RawGrid, path: Path, fmt: str, *, bounds, origin, resoluti
                 f"y_min, y_max) with rows='south_to_north' or 'north_to_south', or origin=(e0, n0) "
                 f"with resolution="
             )
+    with np.errstate(over="ignore", invalid="ignore"):
+        corner = (x0 + (nx - 1) * dx, y0 + (ny - 1) * dy)
+    if not all(np.isfinite(v) for v in (x0, y0, dx, dy, *corner)):
+        # the readers refuse non-finite values of their own; this catches any other reader's
+        # and a grid whose far edge overflows
+        source = _GEOREF_WORDS.get(georef, georef)
+        raise TanbenchError(
+            f"{path}: the georeferencing ({source}) is not finite: origin ({x0:g}, {y0:g}), spacing "
+            f"{dx:g} x {dy:g}, far corner ({corner[0]:g}, {corner[1]:g})"
+        )
     stored_rows = "north_to_south" if dy < 0 else "south_to_north"
     if dy < 0:
         z = z[::-1]
@@ -116,9 +126,12 @@ def georeference(raw: RawGrid, path: Path, fmt: str, *, bounds, origin, resoluti
         x0, dx = x0 + (nx - 1) * dx, -dx
     if out_crs != "metric":
         _check_geographic_extent(out_crs, x0, dx, nx, y0, dy, ny, path)
-    n_bad = int(np.isnan(z).sum())
+    finite = np.isfinite(z)
+    n_bad = int(z.size - np.count_nonzero(finite))
     if n_bad == z.size:
         raise TanbenchError(f"{path}: the grid holds no valid elevation (all nodata)")
+    if n_bad and np.isinf(z).any():  # the built-in readers give NaN already; another reader's inf is a hole too
+        z = np.where(finite, z, np.nan)
     meta = dict(crs=out_crs, source=str(path), format=fmt, georef=georef, rows=stored_rows,
                 nodata_nodes=n_bad)
     try:

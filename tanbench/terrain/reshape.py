@@ -7,16 +7,26 @@ elevations linearly so that the lowest node is at ``low`` and the highest at ``h
 north swapped) or ``mirror-east`` (mirrored east-west), about the origin node. With these a
 sweep builds the issue's real-relief world from configs (a real DEM rescaled to -180..-60 m
 on 8 m truth nodes; the 24 m map is ``map_resolution_m``): ``configs/relief.yaml``.
+
+A ``resample_m`` whose grid would have fewer than 2 x 2 nodes, more than a map may have, or
+need more than half this machine's memory is refused before anything is allocated, in one
+line naming ``terrain.resample_m`` (:func:`check_resampled_size`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
 
+from tanbench.arrays import physical_memory
 from tanbench.errors import TanbenchError
-from tanbench.terrain.grid import Map
+from tanbench.terrain.grid import MAX_NODES, Map
+
+# Peak memory of resampling, per node of the new grid: the east and north coordinate grids and
+# the elevations (8 bytes each), and a copy of the map for the workers.
+BYTES_PER_RESAMPLED_NODE = 32
 
 
 def reshape_terrain(grid: Map, resample_m: float | None, depth_range_m, transform: str) -> Map:
@@ -24,6 +34,7 @@ def reshape_terrain(grid: Map, resample_m: float | None, depth_range_m, transfor
     z = grid.z
     res_e, res_n = grid.res_e, grid.res_n
     if resample_m is not None:
+        check_resampled_size(grid, resample_m)
         e = np.arange(0.0, grid.e_max - grid.e0 + 1e-9, resample_m)
         n = np.arange(0.0, grid.n_max - grid.n0 + 1e-9, resample_m)
         ee, nn = np.meshgrid(grid.e0 + e, grid.n0 + n)
@@ -45,6 +56,51 @@ def reshape_terrain(grid: Map, resample_m: float | None, depth_range_m, transfor
     return replace(grid, z=z, res_e=res_e, res_n=res_n,
                    meta={**grid.meta, "resample_m": resample_m, "depth_range_m": depth_range_m,
                          "transform": transform})
+
+
+def resampled_shape(grid: Map, resample_m: float) -> tuple[int, int]:
+    """(rows, columns) of ``grid`` resampled onto square nodes ``resample_m`` apart (as
+    :func:`reshape_terrain` lays them out), computed without building them."""
+    def count(extent):  # len(np.arange(0.0, extent + 1e-9, resample_m))
+        return max(int(math.ceil((extent + 1e-9) / resample_m)), 0)
+    return count(grid.n_max - grid.n0), count(grid.e_max - grid.e0)
+
+
+def check_resampled_size(grid: Map, resample_m: float) -> None:
+    """Refuse a ``terrain.resample_m`` whose grid would have fewer than 2 x 2 nodes, more nodes
+    than a map may have (the filters' int32 node indices), or need more than half this machine's
+    memory: one line naming the setting, before anything is allocated."""
+    ny, nx = resampled_shape(grid, resample_m)
+    width, height = grid.e_max - grid.e0, grid.n_max - grid.n0
+    what = (f"terrain.resample_m ({resample_m:g} m) resamples the {width:g} x {height:g} m grid onto "
+            f"{nx} x {ny} nodes")
+    if nx < 2 or ny < 2:
+        raise TanbenchError(f"{what}; a map needs at least 2 x 2: use a resample_m of at most "
+                            f"{_round_down(min(width, height))} m")
+    nodes = nx * ny
+    memory = physical_memory()
+    limit, why = MAX_NODES, "a map may have"
+    if memory is not None and memory / 2 / BYTES_PER_RESAMPLED_NODE < limit:
+        limit = int(memory / 2 / BYTES_PER_RESAMPLED_NODE)
+        why = f"fit in half of this machine's {memory / 1e9:.3g} GB"
+    if nodes > limit:
+        finest = math.sqrt(width * height / limit)
+        while resampled_shape(grid, finest)[0] * resampled_shape(grid, finest)[1] > limit:
+            finest *= 1.001
+        raise TanbenchError(f"{what} ({nodes:.3g}), more than the {limit:.3g} that {why}: use a coarser "
+                            f"resample_m (at least {_round_up(finest)} m)")
+
+
+def _round_up(x: float) -> str:
+    """``x`` rounded up to 3 significant digits."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return f"{math.ceil(x / scale) * scale:.3g}"
+
+
+def _round_down(x: float) -> str:
+    """``x`` rounded down to 3 significant digits."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return f"{math.floor(x / scale) * scale:.3g}"
 
 
 def reshape_terrain_numpy(z, e0, n0, res_e, res_n, resample_m, depth_range_m, transform):

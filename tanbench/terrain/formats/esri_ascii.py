@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tanbench.errors import TanbenchError
-from tanbench.terrain.formats.registry import RawGrid, mask_value, register_format
+from tanbench.terrain.formats.registry import RawGrid, as_float, mask_value, register_format
 
 _ASC_KEYS = ("ncols", "nrows", "xllcorner", "xllcenter", "xllcentre", "yllcorner", "yllcenter",
              "yllcentre", "cellsize", "dx", "dy", "nodata_value")
@@ -21,6 +21,7 @@ def read_esri_ascii(path: Path) -> RawGrid:
         raise TanbenchError(f"{path}: not a readable ESRI ASCII grid ({type(exc).__name__})") from None
     lines = text.splitlines()
     header: dict[str, float] = {}
+    given: dict[str, str] = {}  # each header value as the file writes it, for messages
     k = 0
     while k < len(lines):
         parts = lines[k].split()
@@ -35,21 +36,31 @@ def read_esri_ascii(path: Path) -> RawGrid:
                 header[key] = float(parts[1])
             except ValueError:
                 raise TanbenchError(f"{path}: header {parts[0]} value {parts[1]!r} is not a number") from None
+            given[key] = parts[1]
             k += 1
         else:
             break
     for need in ("ncols", "nrows"):
         if need not in header:
             raise TanbenchError(f"{path}: ESRI ASCII header lacks {need}")
+    for key in ("ncols", "nrows"):
+        value = header[key]
+        if not (np.isfinite(value) and value >= 1 and value == int(value)):
+            raise TanbenchError(f"{path}: {key} must be a positive whole number (got {given[key]})")
     nx, ny = int(header["ncols"]), int(header["nrows"])
+    for key in ("xllcorner", "xllcenter", "xllcentre", "yllcorner", "yllcenter", "yllcentre"):
+        if key in header and not np.isfinite(header[key]):
+            raise TanbenchError(f"{path}: {key} must be finite (got {given[key]})")
     if "cellsize" in header:
-        dx = dy = header["cellsize"]
+        steps = ("cellsize",)
     elif "dx" in header and "dy" in header:
-        dx, dy = header["dx"], header["dy"]
+        steps = ("dx", "dy")
     else:
         raise TanbenchError(f"{path}: ESRI ASCII header lacks cellsize (or dx and dy)")
-    if not (dx > 0 and dy > 0):
-        raise TanbenchError(f"{path}: ESRI ASCII cell size must be positive, got {dx} x {dy}")
+    for key in steps:
+        if not (header[key] > 0 and np.isfinite(header[key])):
+            raise TanbenchError(f"{path}: {key} must be a positive finite number (got {given[key]})")
+    dx, dy = header[steps[0]], header[steps[-1]]
     x_ll = _asc_origin(header, "x", dx, path)
     y_ll = _asc_origin(header, "y", dy, path)
     try:
@@ -60,7 +71,7 @@ def read_esri_ascii(path: Path) -> RawGrid:
         raise TanbenchError(
             f"{path}: header says {ny} rows x {nx} columns but the file holds {values.size} values"
         )
-    z = values.reshape(ny, nx)
+    z = as_float(values.reshape(ny, nx), path)  # nan / inf in the data: holes, as in every format
     if "nodata_value" in header:
         z = mask_value(z, header["nodata_value"])
     return RawGrid(z, georef="header", x0=x_ll, y0=y_ll + (ny - 1) * dy, dx=dx, dy=-dy)

@@ -23,8 +23,8 @@ def read_netcdf(path: Path) -> RawGrid:
     elif magic.startswith(b"CDF"):
         from scipy.io import netcdf_file
 
-        try:
-            with netcdf_file(path, "r", mmap=False) as nc:
+        try:  # (a _FillValue the variable's type cannot hold is cast with a numpy warning: quiet, it matches nothing)
+            with np.errstate(invalid="ignore", over="ignore"), netcdf_file(path, "r", mmap=False) as nc:
                 variables = {
                     name: (np.array(var.data), dict(getattr(var, "_attributes", {})),
                            tuple(var.dimensions))
@@ -102,8 +102,8 @@ def _netcdf_raw(path: Path, variables: dict) -> RawGrid:
             f"no coordinate variables x/y, lon/lat or longitude/latitude; variables: {', '.join(variables)}"))
     x, x_attrs, _ = variables[xname]
     y, y_attrs, _ = variables[yname]
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
+    x = _numeric_coordinate(x, xname, path)
+    y = _numeric_coordinate(y, yname, path)
     if x.ndim != 1 or y.ndim != 1 or zdata.ndim != 2:
         raise TanbenchError(
             f"{path}: expected 1-D {xname}, {yname} and a 2-D {zname}, got shapes "
@@ -126,6 +126,14 @@ def _netcdf_raw(path: Path, variables: dict) -> RawGrid:
     return raw
 
 
+def _numeric_coordinate(v: np.ndarray, name: str, path: Path) -> np.ndarray:
+    """A coordinate variable's values as float64; a character (or other non-numeric) variable is an error."""
+    v = np.asarray(v)
+    if v.dtype.kind not in "iuf":
+        raise TanbenchError(f"{path}: coordinate {name} is not numeric (it holds {v.dtype.str.lstrip('<>|=')} values)")
+    return v.astype(np.float64)
+
+
 def _coord_kind(name: str, attrs: dict, path: Path) -> str | None:
     units = attrs.get("units", b"")
     if isinstance(units, (bytes, np.bytes_)):
@@ -139,23 +147,50 @@ def _coord_kind(name: str, attrs: dict, path: Path) -> str | None:
 
 
 def _unpack(data: np.ndarray, attrs: dict, path: Path, name: str) -> np.ndarray:
-    """CF unpacking: _FillValue / missing_value (packed units) -> NaN, then scale and offset."""
+    """CF unpacking: _FillValue / missing_value (packed units) -> NaN, then scale and offset;
+    a value that is not finite once unpacked (an overflow, a non-finite scale_factor) is a hole too."""
+    z = as_float(data, path)
     mask = np.zeros(data.shape, dtype=bool)
     for key in ("_FillValue", "missing_value"):
         if key in attrs:
             for value in np.atleast_1d(np.asarray(attrs[key])).ravel():
                 try:
-                    value = float(value)
+                    float(value)
                 except (TypeError, ValueError):
                     raise TanbenchError(f"{path}: {name}:{key} is not a number") from None
-                if not np.isnan(value):
-                    mask |= data == np.asarray(value).astype(data.dtype)
-    z = as_float(data, path)
+                mask |= _packed_equal(data, value)
+    valid = np.isfinite(z) & ~mask
     scale = _scalar_attr(attrs, "scale_factor", 1.0, path, name)
     offset = _scalar_attr(attrs, "add_offset", 0.0, path, name)
-    z = z * scale + offset
-    z[mask] = np.nan
+    with np.errstate(over="ignore", invalid="ignore"):
+        z = z * scale + offset
+    z[mask | ~np.isfinite(z)] = np.nan
+    if valid.any() and np.isnan(z).all():
+        raise TanbenchError(
+            f"{path}: the grid holds no valid elevation once unpacked: {name}:scale_factor {scale:g} and "
+            f"add_offset {offset:g} make every value non-finite"
+        )
     return z
+
+
+def _packed_equal(data: np.ndarray, value) -> np.ndarray:
+    """Where the packed ``data`` equal a fill value; a value the data's type cannot hold (e.g.
+    1e10 for 16-bit integers, NaN) matches nothing."""
+    nothing = np.zeros(data.shape, dtype=bool)
+    if data.dtype.kind == "f":
+        if np.isnan(float(value)):
+            return nothing
+        with np.errstate(over="ignore"):
+            return data == np.asarray(value).astype(data.dtype)
+    if np.asarray(value).dtype.kind in "iu":  # integers compare exactly (a 64-bit fill is not a float)
+        value = int(value)
+    else:
+        value = float(value)
+        if not (np.isfinite(value) and value == int(value)):
+            return nothing
+        value = int(value)
+    info = np.iinfo(data.dtype)
+    return data == value if info.min <= value <= info.max else nothing
 
 
 def _scalar_attr(attrs, key, default, path, name) -> float:

@@ -52,6 +52,9 @@ def read_npz(path: Path) -> RawGrid:
                 found[key] = float(np.asarray(arrays[key]).reshape(()))
             except (TypeError, ValueError):
                 raise TanbenchError(f"{path}: .npz key {key} must be a single number") from None
+    for key, value in found.items():
+        if not np.isfinite(value):
+            raise TanbenchError(f"{path}: .npz key {key} must be finite, got {value}")
     for key in ("res_e", "res_n"):
         if key in found and not found[key] > 0:
             raise TanbenchError(f"{path}: .npz key {key} must be positive, got {found[key]}")
