@@ -31,6 +31,7 @@ from tanbench.sensors.multibeam import measure_swath, sensor_fan, true_swath
 from tanbench.sensors.pressure import measure_depth
 from tanbench.sensors.sonar import altimeter_beam_vectors, dvl_beam_vectors, measure_ranges, true_ranges
 from tanbench.terrain import truth_map
+from tanbench.terrain.mosaic import find_holes, over_holes
 from tanbench.vehicle.trajectory import MotionPlan, Truth, paper_plan, simulate_truth, survey_plan, vehicle_run_plan
 from tanbench.vehicle.attitude import yaw_to_heading_deg
 
@@ -262,12 +263,8 @@ def check_track_on_map(truth: Truth, tmap) -> None:
         raise TanbenchError(
             f"the trajectory leaves the map at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, {n[k]:.0f}) m; "
             f"the map spans E {tmap.e0:.0f}..{tmap.e_max:.0f}, N {tmap.n0:.0f}..{tmap.n_max:.0f} m")
+    check_no_holes(tmap, t, e, n, "terrain.fill_holes: true")
     floor = tmap.elevation(e, n)
-    if np.isnan(floor).any():
-        k = int(np.argmax(np.isnan(floor)))
-        raise TanbenchError(
-            f"the map has no data (a hole) under the track at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, "
-            f"{n[k]:.0f}) m; set terrain.fill_holes: true to fill holes")
     clearance = u - floor
     if clearance.min() < MIN_ALTITUDE_M and np.median(floor) > 0:
         raise TanbenchError(
@@ -280,6 +277,26 @@ def check_track_on_map(truth: Truth, tmap) -> None:
         raise TanbenchError(
             f"the vehicle runs into the seafloor at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, {n[k]:.0f}) m: "
             f"depth {-u[k]:.1f} m over a {-floor[k]:.1f} m seafloor; raise the trajectory or move it")
+
+
+def check_no_holes(tmap, t, e, n, fill: str, track: str = "the track", margin: float = 0.0) -> None:
+    """Refuse a track (times ``t``, positions ``e``, ``n``) whose map look-ups, widened by ``margin`` metres around
+    each point, read a hole (a NaN node: :func:`tanbench.terrain.mosaic.over_holes`); ``fill`` names the setting
+    that fills holes, ``track`` what the track is. Points off the map are not holes (whether a track may leave the
+    map is the caller's to say). Both the sweep's worlds (:func:`check_track_on_map`: the true track, no margin) and
+    ``tanbench replay`` (the navigation solution, the filter's initial uncertainty around it:
+    ``missions/observe.py``) refuse holes with it."""
+    hole = over_holes(tmap, e, n, margin)
+    if hole.any():
+        k = int(np.argmax(hole))
+        where = ""
+        if margin > 0:
+            he, hn = min(find_holes(tmap, e[k], n[k], margin), key=lambda h: math.hypot(h[0] - e[k], h[1] - n[k]))
+            where = (f" (the nearest node without data: (E, N) = ({he:.0f}, {hn:.0f}) m, "
+                     f"{math.hypot(he - e[k], hn - n[k]):.0f} m away)")
+        raise TanbenchError(
+            f"the map has no data (a hole) under {track} at t={t[k]:.0f} s, (E, N) = ({e[k]:.0f}, "
+            f"{n[k]:.0f}) m{where}; set {fill} to fill holes")
 
 
 def vehicle_frame(vehicle: VehicleData, every: int = 1):

@@ -248,3 +248,82 @@ def test_simulate_refuses_a_log_path_that_is_a_file_before_simulating(tmp_path, 
     result = CliRunner().invoke(app, ["simulate", "--area", "A", "--duration", "20", "--log", str(tmp_path / "a-file")])
     assert result.exit_code != 0 and "exists and is not a directory" in str(result.output) + str(result.exception)
     assert (tmp_path / "a-file").read_text() == "keep me"
+
+
+def holed(nmap, path, nodes):
+    """``nmap`` as an .npz with NaN at ``nodes`` (a tuple of index arrays or slices)."""
+    z = nmap.z.copy()
+    z[nodes] = np.nan
+    np.savez(path, z=z, e0=nmap.e0, n0=nmap.n0, res_e=nmap.res_e, res_n=nmap.res_n)
+    return path
+
+
+def node_near(nmap, e, n):
+    """The (row, column) of the node nearest (e, n)."""
+    return int(round((n - nmap.n0) / nmap.res_n)), int(round((e - nmap.e0) / nmap.res_e))
+
+
+def test_a_hole_under_the_navigation_solution_or_within_the_initial_uncertainty_is_refused(base, tmp_path):
+    """The sweep's check of its true track (no data under it: refused, terrain.fill_holes fills), for a recorded
+    mission: the navigation solution with filter.initial_area_m / 2 (75 m) around it, at every sample. Refused: a
+    hole under the track, a map with three finite nodes, one missing node 50 m beside the start; replayed: a hole
+    300 m away, and the holed map with map.fill_holes: true."""
+    d, log, nmap = base
+    nav = log.tables["navigation"]
+    e, n = nav["east_m"].to_numpy(), nav["north_m"].to_numpy()
+    i0, j0 = node_near(nmap, e[0] + 50.0, n[0])
+    few = np.ones(nmap.z.shape, dtype=bool)
+    few[0, 0] = few[0, 1] = few[1, 0] = False
+    refused = {
+        "under": (holed(nmap, tmp_path / "under.npz", (slice(20, 60), slice(90, 150))), "(E, N) = (1152, 374) m "
+                  "(the nearest node without data: (E, N) = (1154, 374) m, 2 m away)"),
+        "three-nodes": (holed(nmap, tmp_path / "few.npz", few), "the map has no data (a hole)"),
+        "beside": (holed(nmap, tmp_path / "beside.npz", ([i0], [j0])), "at t=0 s, (E, N) = (1152, 374) m (the nearest "
+                   "node without data: (E, N) = (1204, 374) m, 52 m away)"),
+    }
+    for name, (path, where) in refused.items():
+        with pytest.raises(TanbenchError) as err:
+            replay(d / "log", str(path), ["tight-dvl"], d / "settings.yaml", out=tmp_path / f"out-{name}")
+        text = str(err.value)
+        assert text.startswith(f"{d / 'log'}: the map has no data (a hole) under the navigation solution or within "
+                               f"filter.initial_area_m / 2 = 75 m of it at t="), (name, text)
+        assert where in text and text.endswith("; set map.fill_holes: true in the --settings file to fill holes")
+        assert "\n" not in text and not (tmp_path / f"out-{name}").exists()
+    i1, j1 = node_near(nmap, e.max() + 300.0, n.min())
+    far = replay(d / "log", str(holed(nmap, tmp_path / "far.npz", ([i1], [j1]))), ["tight-dvl"], d / "settings.yaml",
+                 out=tmp_path / "out-far")
+    (tmp_path / "fill.yaml").write_text(yaml.safe_dump({"particles": 300, "map": {"fill_holes": True}}))
+    filled = replay(d / "log", str(refused["under"][0]), ["tight-dvl"], tmp_path / "fill.yaml",
+                    out=tmp_path / "out-filled")
+    assert far.rows[0]["status"] == filled.rows[0]["status"] == "ok"
+
+
+def test_the_hole_check_reads_the_navigation_solution_not_the_reference(base, tmp_path):
+    """A hole under the reference track (moved 400 m east, far from the navigation solution) is not refused: the
+    reference is the scoring's, never what the vehicle believed (docs/missions.md, section 5, "Holes in the map")."""
+    d, log, nmap = base
+    log_dir = tmp_path / "log"
+    shutil.copytree(d / "log", log_dir)
+    _edit_table("reference", lambda df: df.assign(east_m=df["east_m"] + 400.0))(log_dir)
+    ref = pd.read_parquet(log_dir / "reference.parquet")
+    rows, cols = zip(*(node_near(nmap, e, n) for e, n in zip(ref["east_m"], ref["north_m"])))
+    path = holed(nmap, tmp_path / "ref-hole.npz", (np.array(rows), np.array(cols)))
+    report = replay(log_dir, str(path), ["tight-dvl"], d / "settings.yaml", out=tmp_path / "out")
+    assert report.rows[0]["status"] == "ok"
+
+
+def test_the_hole_check_is_the_sweep_s_without_a_margin():
+    """One piece of code: over_holes with no margin is the bilinear look-up's NaN, and with a margin it says which
+    points find_holes would find a hole around."""
+    from tanbench.terrain.grid import Map
+    from tanbench.terrain.mosaic import find_holes, over_holes
+
+    rng = np.random.default_rng(2)
+    z = rng.normal(-50.0, 3.0, (30, 40))
+    z[5, 7] = z[12:14, 20:23] = np.nan
+    m = Map(z, 100.0, 200.0, 5.0, 4.0, name="holed")
+    e, n = rng.uniform(90.0, 310.0, 600), rng.uniform(190.0, 330.0, 600)
+    inside = m.contains(e, n)
+    np.testing.assert_array_equal(over_holes(m, e, n)[inside], np.isnan(m.elevation(e, n))[inside])
+    for margin in (0.0, 3.0, 12.5):
+        assert list(over_holes(m, e, n, margin)) == [bool(find_holes(m, a, b, margin)) for a, b in zip(e, n)]

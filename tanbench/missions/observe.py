@@ -24,7 +24,7 @@ import numpy as np
 from tanbench.errors import TanbenchError
 from tanbench.missions.logfile import MissionLog
 from tanbench.missions.spec import ACCEL, GYRO, LONLAT, LOCAL, TIME, VELOCITY, range_columns
-from tanbench.simulation import NavSolution, Observations
+from tanbench.simulation import NavSolution, Observations, check_no_holes
 from tanbench.methods.api import update_indices
 from tanbench.terrain.georef import lonlat_to_local
 
@@ -248,3 +248,16 @@ def check_start_on_map(scenario, obs: Observations, nmap, label: str) -> None:
             f"{label}: the navigation solution starts at (E, N) = ({e:.0f}, {n:.0f}) m in the map's frame and the "
             f"initial uncertainty (filter.initial_area_m / 2 = {half:g} m around it) leaves the map (E {nmap.e0:.0f}.."
             f"{nmap.e_max:.0f}, N {nmap.n0:.0f}..{nmap.n_max:.0f} m): is it the mission's map, and the log in its frame?")
+
+
+def check_no_holes_near_track(scenario, obs: Observations, nmap, label: str) -> None:
+    """Refuse a map with no data (a hole) under the navigation solution or within the filter's initial uncertainty
+    (``filter.initial_area_m`` / 2) of it, at any sample: the sweep's check of its true track
+    (:func:`tanbench.simulation.check_no_holes`), for a mission whose true track is not known (docs/missions.md,
+    section 5, "Holes in the map"). A map read with ``map.fill_holes`` has none."""
+    half = scenario.filter.initial_area_m / 2.0
+    try:
+        check_no_holes(nmap, obs.t, obs.nav.pos[:, 0], obs.nav.pos[:, 1], "map.fill_holes: true in the --settings file",
+                       f"the navigation solution or within filter.initial_area_m / 2 = {half:g} m of it", margin=half)
+    except TanbenchError as exc:
+        raise TanbenchError(f"{label}: {exc}") from None

@@ -33,7 +33,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from tanbench.errors import TanbenchError
 from tanbench.missions.logfile import MissionLog, read_log
-from tanbench.missions.observe import LoggedRun, check_start_on_map, observations, reference_truth
+from tanbench.missions.observe import (LoggedRun, check_no_holes_near_track, check_start_on_map, observations,
+                                      reference_truth)
 from tanbench import store
 from tanbench.bounds.pcrb import bound_series, update_track
 from tanbench.config import SensorSpec, TerrainSpec, flatten, format_validation_error
@@ -173,7 +174,6 @@ def replay(log_dir, map_path: str | None = None, methods=None, settings_path=Non
     """Run ``methods`` over the log in ``log_dir`` and the map; write the results to ``out``."""
     import yaml
 
-
     log = read_log(log_dir)
     label = str(settings_path or log.path)
     settings, settings_text = load_settings(settings_path)
@@ -182,6 +182,7 @@ def replay(log_dir, map_path: str | None = None, methods=None, settings_path=Non
     scenario = replay_scenario(log, settings, spec, nmap, label)
     obs = observations(log, nmap)
     check_start_on_map(scenario, obs, nmap, str(log.path))
+    check_no_holes_near_track(scenario, obs, nmap, str(log.path))
     truth = reference_truth(log, obs, nmap)
     out = Path(out) if out is not None else Path("results") / f"replay-{log.path.resolve().name}"
     _check_out(out)

@@ -2,8 +2,8 @@
 
 :func:`mosaic` joins tiles lying on one grid (overlaps averaged) and reports every seam;
 :func:`tanbench.terrain.files.read_tiles` reads tiles, mosaics them in native coordinates
-and projects once. :func:`find_holes` lists the NaN nodes a track's look-ups would read,
-:func:`fill_holes` fills them on request (the readers keep them).
+and projects once. :func:`find_holes` lists the NaN nodes a track's look-ups would read (:func:`over_holes`: which
+points read one), :func:`fill_holes` fills them on request (the readers keep them).
 """
 
 from __future__ import annotations
@@ -112,31 +112,20 @@ def find_holes(grid: Map, e, n, margin: float = 0.0) -> list[tuple[float, float]
 
     A look-up reads the four nodes of the cell holding the point (as the kernel in
     :mod:`tanbench.terrain.grid` does); ``margin`` metres widen that to every cell
-    within a box of half-width ``margin`` around the point (for a sonar footprint).
-    Points whose box misses the grid altogether are not holes (check those with
-    :meth:`Map.contains`). Holes are returned once each, south to north, west to east,
-    so that a caller can reject a track with their locations or fill them on request.
+    within a box of half-width ``margin`` around the point (for a sonar footprint, or an
+    uncertainty around a track). Points whose box misses the grid altogether are not
+    holes (check those with :meth:`Map.contains`). Holes are returned once each, south to
+    north, west to east, so that a caller can reject a track with their locations or fill
+    them on request; :func:`over_holes` says which points touch one.
     """
-    if not (np.isfinite(margin) and margin >= 0):
-        raise TanbenchError(f"find_holes: margin must be a non-negative number of metres, got {margin}")
     bad = np.isnan(grid.z)
+    _check_margin(margin)
     if not bad.any():
         return []
-    e, n = np.broadcast_arrays(np.asarray(e, dtype=float), np.asarray(n, dtype=float))
-    e, n = e.ravel(), n.ravel()
-    ny, nx = grid.z.shape
-    fx_lo = (e - margin - grid.e0) / grid.res_e
-    fx_hi = (e + margin - grid.e0) / grid.res_e
-    fy_lo = (n - margin - grid.n0) / grid.res_n
-    fy_hi = (n + margin - grid.n0) / grid.res_n
-    keep = (np.isfinite(e) & np.isfinite(n) & (fx_hi >= 0) & (fx_lo <= nx - 1)
-            & (fy_hi >= 0) & (fy_lo <= ny - 1))
+    keep, i_lo, i_hi, j_lo, j_hi = _look_up_boxes(grid, e, n, margin)
     if not keep.any():
         return []
-    j_lo = np.clip(np.floor(fx_lo[keep]), 0, nx - 2).astype(np.int64)
-    j_hi = np.clip(np.floor(fx_hi[keep]), 0, nx - 2).astype(np.int64) + 1
-    i_lo = np.clip(np.floor(fy_lo[keep]), 0, ny - 2).astype(np.int64)
-    i_hi = np.clip(np.floor(fy_hi[keep]), 0, ny - 2).astype(np.int64) + 1
+    ny, nx = grid.z.shape
     # Cover each point's node box with a 2-D difference array, then integrate it.
     cover = np.zeros((ny + 1, nx + 1), dtype=np.int64)
     np.add.at(cover, (i_lo, j_lo), 1)
@@ -147,6 +136,48 @@ def find_holes(grid: Map, e, n, margin: float = 0.0) -> list[tuple[float, float]
     ii, jj = np.nonzero(touched & bad)
     return [(float(grid.e0 + j * grid.res_e), float(grid.n0 + i * grid.res_n))
             for i, j in zip(ii, jj)]
+
+
+def over_holes(grid: Map, e, n, margin: float = 0.0) -> np.ndarray:
+    """Per point (e, n), flattened: whether its look-ups (:func:`find_holes`' box, ``margin`` metres around
+    the point) touch a NaN node."""
+    _check_margin(margin)
+    e, n = np.broadcast_arrays(np.asarray(e, dtype=float), np.asarray(n, dtype=float))
+    out = np.zeros(e.size, dtype=bool)
+    bad = np.isnan(grid.z)
+    if not bad.any():
+        return out
+    keep, i_lo, i_hi, j_lo, j_hi = _look_up_boxes(grid, e, n, margin)
+    ny, nx = grid.z.shape
+    total = np.zeros((ny + 1, nx + 1), dtype=np.int64)  # NaN nodes south-west of each node, inclusive
+    total[1:, 1:] = bad.cumsum(axis=0).cumsum(axis=1)
+    count = total[i_hi + 1, j_hi + 1] - total[i_lo, j_hi + 1] - total[i_hi + 1, j_lo] + total[i_lo, j_lo]
+    out[keep] = count > 0
+    return out
+
+
+def _check_margin(margin: float) -> None:
+    if not (np.isfinite(margin) and margin >= 0):
+        raise TanbenchError(f"find_holes: margin must be a non-negative number of metres, got {margin}")
+
+
+def _look_up_boxes(grid: Map, e, n, margin: float):
+    """Which points (e, n), flattened, have a box of half-width ``margin`` on the grid (``keep``), and the
+    node rows ``i_lo..i_hi`` and columns ``j_lo..j_hi`` that look-ups in each kept box read."""
+    e, n = np.broadcast_arrays(np.asarray(e, dtype=float), np.asarray(n, dtype=float))
+    e, n = e.ravel(), n.ravel()
+    ny, nx = grid.z.shape
+    fx_lo = (e - margin - grid.e0) / grid.res_e
+    fx_hi = (e + margin - grid.e0) / grid.res_e
+    fy_lo = (n - margin - grid.n0) / grid.res_n
+    fy_hi = (n + margin - grid.n0) / grid.res_n
+    keep = (np.isfinite(e) & np.isfinite(n) & (fx_hi >= 0) & (fx_lo <= nx - 1)
+            & (fy_hi >= 0) & (fy_lo <= ny - 1))
+    j_lo = np.clip(np.floor(fx_lo[keep]), 0, nx - 2).astype(np.int64)
+    j_hi = np.clip(np.floor(fx_hi[keep]), 0, nx - 2).astype(np.int64) + 1
+    i_lo = np.clip(np.floor(fy_lo[keep]), 0, ny - 2).astype(np.int64)
+    i_hi = np.clip(np.floor(fy_hi[keep]), 0, ny - 2).astype(np.int64) + 1
+    return keep, i_lo, i_hi, j_lo, j_hi
 
 
 def fill_holes(grid: Map, method: str = "laplace") -> Map:
