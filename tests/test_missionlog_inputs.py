@@ -327,3 +327,17 @@ def test_the_hole_check_is_the_sweep_s_without_a_margin():
     np.testing.assert_array_equal(over_holes(m, e, n)[inside], np.isnan(m.elevation(e, n))[inside])
     for margin in (0.0, 3.0, 12.5):
         assert list(over_holes(m, e, n, margin)) == [bool(find_holes(m, a, b, margin)) for a, b in zip(e, n)]
+
+
+def test_replay_refuses_a_sampling_time_longer_than_the_log(base, tmp_path):
+    """The sweep's check of sampling_time_s against its run's length, on the span of the log's DVL pings (40 s)."""
+    d, _, _ = base
+    (tmp_path / "long.yaml").write_text(yaml.safe_dump({"particles": 300, "sampling_time_s": 1000}))
+    with pytest.raises(TanbenchError) as err:
+        replay(d / "log", str(d / "map.npz"), ["tight-dvl"], tmp_path / "long.yaml", out=tmp_path / "out")
+    assert str(err.value) == (f"{tmp_path / 'long.yaml'}: sampling_time_s (1000 s) is longer than the span of the "
+                              f"log's DVL pings (40 s): the filter would not update after the start")
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "whole.yaml").write_text(yaml.safe_dump({"particles": 300, "sampling_time_s": 40}))
+    report = replay(d / "log", str(d / "map.npz"), ["tight-dvl"], tmp_path / "whole.yaml", out=tmp_path / "whole")
+    assert report.rows[0]["status"] == "ok"

@@ -26,6 +26,7 @@ from tanbench.missions.logfile import MissionLog
 from tanbench.missions.spec import ACCEL, GYRO, LONLAT, LOCAL, TIME, VELOCITY, range_columns
 from tanbench.simulation import NavSolution, Observations, check_no_holes
 from tanbench.methods.api import update_indices
+from tanbench.runner.validate import check_sampling_time
 from tanbench.terrain.georef import lonlat_to_local
 
 IMU_JITTER = 0.01  # largest departure of an IMU sample interval from 1 / imu_rate_hz, as a fraction of it
@@ -259,5 +260,15 @@ def check_no_holes_near_track(scenario, obs: Observations, nmap, label: str) -> 
     try:
         check_no_holes(nmap, obs.t, obs.nav.pos[:, 0], obs.nav.pos[:, 1], "map.fill_holes: true in the --settings file",
                        f"the navigation solution or within filter.initial_area_m / 2 = {half:g} m of it", margin=half)
+    except TanbenchError as exc:
+        raise TanbenchError(f"{label}: {exc}") from None
+
+
+def check_sampling_time_in_log(scenario, obs: Observations, label: str) -> None:
+    """Refuse a ``sampling_time_s`` longer than the log's DVL pings span (the sweep's check of its run's length,
+    :func:`tanbench.runner.validate.check_sampling_time`): the methods would not update after the first ping."""
+    pings = obs.t[obs.ping_idx]
+    try:
+        check_sampling_time(scenario, float(pings[-1] - pings[0]), "the span of the log's DVL pings")
     except TanbenchError as exc:
         raise TanbenchError(f"{label}: {exc}") from None

@@ -33,8 +33,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from tanbench.errors import TanbenchError
 from tanbench.missions.logfile import MissionLog, read_log
-from tanbench.missions.observe import (LoggedRun, check_no_holes_near_track, check_start_on_map, observations,
-                                      reference_truth)
+from tanbench.missions.observe import (LoggedRun, check_no_holes_near_track, check_sampling_time_in_log,
+                                      check_start_on_map, observations, reference_truth)
 from tanbench import store
 from tanbench.bounds.pcrb import bound_series, update_track
 from tanbench.config import SensorSpec, TerrainSpec, flatten, format_validation_error
@@ -181,6 +181,7 @@ def replay(log_dir, map_path: str | None = None, methods=None, settings_path=Non
     nmap, spec = read_map(settings, map_path, label)
     scenario = replay_scenario(log, settings, spec, nmap, label)
     obs = observations(log, nmap)
+    check_sampling_time_in_log(scenario, obs, label)
     check_start_on_map(scenario, obs, nmap, str(log.path))
     check_no_holes_near_track(scenario, obs, nmap, str(log.path))
     truth = reference_truth(log, obs, nmap)

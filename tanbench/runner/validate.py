@@ -116,6 +116,14 @@ def check_world(cell: Cell, world, sensors_used: set[str]) -> None:
                          f"have no measurement; raise max_range_m or lower the track")
 
 
+def check_sampling_time(scenario, length_s: float, run: str = "the run") -> None:
+    """Refuse a ``sampling_time_s`` longer than the run (``length_s`` seconds; ``run`` says what was measured): the
+    filter would not update after the start. A sweep's cells and ``tanbench replay`` (the log's DVL pings) use it."""
+    if scenario.sampling_time_s > length_s + 1e-9:
+        raise TanbenchError(f"sampling_time_s ({scenario.sampling_time_s:g} s) is longer than {run} "
+                            f"({length_s:g} s): the filter would not update after the start")
+
+
 def validate_worlds(sweep: Sweep) -> None:
     """Check every cell against its terrain: memory, maps, track, sonar and initial uncertainty."""
     suffixes = {name.rsplit("-", 1)[-1] for name in sweep.spec.methods if get(name).builtin}
@@ -125,9 +133,7 @@ def validate_worlds(sweep: Sweep) -> None:
         sc = cell.scenario
         try:
             length = motion_plan(sc).duration
-            if sc.sampling_time_s > length + 1e-9:
-                raise ValueError(f"sampling_time_s ({sc.sampling_time_s:g} s) is longer than the run "
-                                 f"({length:g} s): the filter would not update after the start")
+            check_sampling_time(sc, length)
             if "mbe" in suffixes and not sc.sensors.multibeam_beams:
                 raise ValueError("the multibeam methods (*-mbe) need a multibeam: set sensors.multibeam_beams > 0")
             world = json.dumps(sc.world_spec(), sort_keys=True)
