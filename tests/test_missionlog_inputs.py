@@ -162,6 +162,17 @@ LOG_CASES = [
      _both(_remove("reference.parquet"),
            _edit_table("navigation", lambda df: df.rename(columns={"east_m": "lon_deg", "north_m": "lat_deg"}))), {},
      "positions are lon/lat but the map"),
+    ("a negative range", _edit_table("dvl", lambda df: df.assign(range_1_m=-5.0)), {},
+     "dvl.parquet: range_1_m is -5 m at row 0; a range is the slant distance along the beam, positive"),
+    ("a zero range",
+     _edit_table("altimeter", lambda df: df.assign(range_1_m=df["range_1_m"].where(df.index != 3, 0.0))), {},
+     "altimeter.parquet: range_1_m is 0 m at row 3"),
+    ("an infinite range",
+     _edit_table("dvl", lambda df: df.assign(range_2_m=df["range_2_m"].where(df.index != 7, np.inf))), {},
+     "dvl.parquet: range_2_m is inf m at row 7"),
+    ("a negative reference range",
+     _edit_table("reference_ranges", lambda df: df.assign(dvl_range_4_m=-df["dvl_range_4_m"])), {},
+     "reference_ranges.parquet: dvl_range_4_m is -"),
     ("an unknown method", None, {"methods": ["tight-dvl,kalman-magic"]}, "unknown method 'kalman-magic'"),
     ("no map", None, {"map_path": None}, "no map: give --map FILE"),
     ("a missing map file", None, {"map_path": "nowhere.npz"}, "nowhere.npz"),
@@ -341,3 +352,41 @@ def test_replay_refuses_a_sampling_time_longer_than_the_log(base, tmp_path):
     (tmp_path / "whole.yaml").write_text(yaml.safe_dump({"particles": 300, "sampling_time_s": 40}))
     report = replay(d / "log", str(d / "map.npz"), ["tight-dvl"], tmp_path / "whole.yaml", out=tmp_path / "whole")
     assert report.rows[0]["status"] == "ok"
+
+
+def test_a_csv_row_with_fewer_or_more_fields_than_the_header_is_refused(base, tmp_path):
+    """A CSV table cut short (its last row's last field gone, its last number cut) or with a field too many is
+    refused naming the file, the row and the line: pandas would read NaN for the missing field or shift the row."""
+    d, log, _ = base
+    write_log(tmp_path / "csv", log, "csv")
+    read_log(tmp_path / "csv")  # intact, it reads
+    cases = {
+        "cut": lambda text: text[:-30],
+        "extra": lambda text: text.replace("\n", ",1.5\n", 6).replace(",1.5\n", "\n", 5),
+        "every-row-extra": lambda text: "\n".join(line + ",0" if k else line
+                                                  for k, line in enumerate(text.splitlines())) + "\n",
+    }
+    messages = {"cut": "row 40 (line 42) has 7 fields but the header has 8: a truncated or damaged table?",
+                "extra": "row 4 (line 6) has 9 fields but the header has 8: a truncated or damaged table?",
+                "every-row-extra": "row 0 (line 2) has 9 fields but the header has 8: a truncated or damaged table?"}
+    for name, edit in cases.items():
+        log_dir = tmp_path / name
+        shutil.copytree(tmp_path / "csv", log_dir)
+        (log_dir / "dvl.csv").write_text(edit((log_dir / "dvl.csv").read_text()))
+        with pytest.raises(TanbenchError) as err:
+            replay(log_dir, str(d / "map.npz"), ["tight-dvl"], d / "settings.yaml", out=tmp_path / f"out-{name}")
+        assert str(err.value) == f"{log_dir / 'dvl.csv'}: {messages[name]}", name
+        assert not (tmp_path / f"out-{name}").exists()
+
+
+def test_write_log_refuses_ranges_that_reading_would_refuse(base, tmp_path):
+    """What write_log writes, read_log reads: a non-positive range is refused before any file is written."""
+    _, log, _ = base
+    tables = dict(log.tables)
+    tables["dvl"] = tables["dvl"].assign(range_2_m=tables["dvl"]["range_2_m"].where(tables["dvl"].index != 5, -0.3))
+    with pytest.raises(TanbenchError) as err:
+        write_log(tmp_path / "log", MissionLog(meta=log.meta, tables=tables))
+    assert str(err.value) == (f"cannot write the mission log {tmp_path / 'log'}: its dvl table: range_2_m is -0.3 m "
+                              f"at row 5; a range is the slant distance along the beam, positive (NaN, an empty CSV "
+                              f"field, for no bottom)")
+    assert not (tmp_path / "log").exists()

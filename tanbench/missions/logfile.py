@@ -10,6 +10,7 @@ Every problem is one :class:`~tanbench.errors.TanbenchError` line naming the fil
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -98,6 +99,8 @@ def _table_file(directory: Path, name: str, required: bool) -> Path | None:
 
 
 def _read_frame(path: Path) -> pd.DataFrame:
+    if path.suffix == ".csv":
+        _check_csv_rows(path)
     try:
         df = pd.read_csv(path) if path.suffix == ".csv" else pd.read_parquet(path)
     except Exception as exc:  # noqa: BLE001 - any reader failure is the file's problem, said in one line
@@ -109,6 +112,39 @@ def _read_frame(path: Path) -> pd.DataFrame:
         if not pd.api.types.is_numeric_dtype(df[col]) or pd.api.types.is_bool_dtype(df[col]):
             raise TanbenchError(f"{path}: column {col!r} is not numeric ({df[col].dtype})")
     return df.astype(np.float64)
+
+
+def _check_csv_rows(path: Path) -> None:
+    """Every row of a CSV table has as many fields as its header: a row cut short (a truncated file) or with a
+    field too many would otherwise be read with NaN for what is missing, or shifted. Files the csv module
+    cannot read are left to pandas' reader, which names their problem."""
+    import csv
+
+    try:
+        with path.open(newline="") as f:
+            reader = csv.reader(f)
+            header = next(reader, None)
+            if header is None:
+                return
+            row = -1
+            for fields in reader:
+                if not fields:  # a blank line, which pandas skips too
+                    continue
+                row += 1
+                if len(fields) != len(header):
+                    raise TanbenchError(f"{path}: row {row} (line {reader.line_num}) has {len(fields)} fields but the "
+                                        f"header has {len(header)}: a truncated or damaged table?")
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return
+
+
+def check_ranges(path, name: str, values: np.ndarray) -> None:
+    """A range column: slant distances along the beam, positive and finite, NaN where there was no bottom."""
+    bad = ~np.isnan(values) & ~(np.isfinite(values) & (values > 0))
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise TanbenchError(f"{path}: {name} is {values[k]:g} m at row {k}; a range is the slant distance along the "
+                            f"beam, positive (NaN, an empty CSV field, for no bottom)")
 
 
 class _Columns:
@@ -148,7 +184,7 @@ class _Columns:
         """Every ``<prefix>range_<i>_m`` column, i = 1..m without a gap; returns m."""
         m = 0
         while f"{prefix}range_{m + 1}_m" in self.left:
-            self.take(f"{prefix}range_{m + 1}_m")
+            check_ranges(self.path, f"{prefix}range_{m + 1}_m", self.take(f"{prefix}range_{m + 1}_m"))
             m += 1
         return m
 
@@ -262,8 +298,8 @@ def check_log_directory(directory: Path) -> None:
 def write_log(directory, log: MissionLog, fmt: str = "parquet") -> list[Path]:
     """Write ``log`` into ``directory`` (tables as ``fmt``: parquet or csv); returns the files.
 
-    Body-frame vectors are written in the metadata's ``body_frame``. A directory that holds
-    anything but a mission log is refused.
+    Body-frame vectors are written in the metadata's ``body_frame``. A directory that holds anything but a mission
+    log is refused, and so is a table that reading would refuse for its ranges (nothing is written then).
     """
     import yaml
 
@@ -271,6 +307,10 @@ def write_log(directory, log: MissionLog, fmt: str = "parquet") -> list[Path]:
     if fmt not in ("parquet", "csv"):
         raise TanbenchError(f"mission-log tables are parquet or csv, not {fmt!r}")
     check_log_directory(directory)
+    for name, df in log.tables.items():
+        for col in df.columns:
+            if re.fullmatch(r"([a-z]+_)?range_\d+_m", col):
+                check_ranges(f"cannot write the mission log {directory}: its {name} table", col, df[col].to_numpy())
     written = []
     try:
         for name, df in log.tables.items():
