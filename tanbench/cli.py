@@ -356,6 +356,8 @@ def simulate(
     lonlat: bool = typer.Option(False, "--lonlat", help="The mission log's positions in WGS84 lon/lat (the terrain "
                                 "must be georeferenced)."),
     log_format: str = typer.Option("parquet", "--log-format", help="The mission log's tables: parquet or csv."),
+    force: bool = typer.Option(False, "--force", help="Overwrite the mission log already in --log DIR, if it is a "
+                               "simulated one (a recorded log is never overwritten)."),
 ):
     import math
 
@@ -378,10 +380,12 @@ def simulate(
         raise TanbenchError(f"--log-format must be parquet or csv, not {log_format!r}")
     if lonlat and log is None:
         raise TanbenchError("--lonlat applies to the mission log: give --log DIR")
+    if force and log is None:
+        raise TanbenchError("--force applies to the mission log: give --log DIR")
     if log is not None:
         from tanbench.missions.logfile import check_log_directory
 
-        check_log_directory(log)  # before the simulation, not after it
+        check_log_directory(log, force)  # before the simulation, not after it
     if sweep_file is not None:
         from tanbench.sweep import load_sweep
 
@@ -409,7 +413,7 @@ def simulate(
                f"heading error {vehicle.initial_heading_error_deg:+.0f} deg at start, "
                f"{(df['nav_heading_deg'] - df['truth_heading_deg'] + 180).mod(360).iloc[-1] - 180:+.1f} deg at end")
     if log is not None:
-        _write_mission_log(scenario, vehicle, seed, log, lonlat, log_format)
+        _write_mission_log(scenario, vehicle, seed, log, lonlat, log_format, force)
     if out is not None:
         from tanbench import store
 
@@ -424,7 +428,8 @@ def simulate(
         typer.echo(f"wrote {out} ({len(df)} rows x {len(df.columns)} columns)")
 
 
-def _write_mission_log(scenario, vehicle, seed: int, log: Path, lonlat: bool, log_format: str) -> None:
+def _write_mission_log(scenario, vehicle, seed: int, log: Path, lonlat: bool, log_format: str,
+                       force: bool = False) -> None:
     """``simulate --log``: the mission log, the navigation map and the method settings of the run."""
     from tanbench import store
     from tanbench.missions.logfile import write_log
@@ -432,7 +437,7 @@ def _write_mission_log(scenario, vehicle, seed: int, log: Path, lonlat: bool, lo
     from tanbench.terrain import navigation_map
 
     mission = simulated_log(scenario, vehicle, seed, lonlat)
-    files = write_log(log, mission, log_format)
+    files = write_log(log, mission, log_format, overwrite=force)
     write_map(navigation_map(scenario.terrain, scenario.map_resolution_m), log / MAP_FILE)
     store.write_text(settings_text(scenario, lonlat), log / SETTINGS_FILE)
     typer.echo(f"wrote the mission log {log} ({len(files) - 1} tables, {'lon/lat' if lonlat else 'map-frame'} "

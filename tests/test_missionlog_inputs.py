@@ -390,3 +390,86 @@ def test_write_log_refuses_ranges_that_reading_would_refuse(base, tmp_path):
                               f"at row 5; a range is the slant distance along the beam, positive (NaN, an empty CSV "
                               f"field, for no bottom)")
     assert not (tmp_path / "log").exists()
+
+
+def fingerprint(directory):
+    """Every file of a directory with its bytes and modification time."""
+    return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in sorted(directory.iterdir())}
+
+
+def test_simulate_log_never_overwrites_a_log_without_force_nor_a_recorded_one(base, tmp_path, monkeypatch):
+    """An existing simulated log: refused without --force (before simulating), overwritten with it; a recorded log
+    (mission.yaml's source is not a simulation): refused with or without --force; nothing changed by a refusal."""
+    from typer.testing import CliRunner
+
+    import tanbench.simulation
+    from tanbench.cli import app
+
+    d, _, _ = base
+    simulated, recorded = tmp_path / "simulated", tmp_path / "recorded"
+    shutil.copytree(d / "log", simulated)
+    shutil.copytree(d / "log", recorded)
+    _edit_meta(_with("source", {"vehicle": "Sirius", "dive": 12}))(recorded)
+    before = {p: fingerprint(p) for p in (simulated, recorded)}
+    real = tanbench.simulation.simulate_vehicle
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("simulated before the log directory was checked")
+
+    monkeypatch.setattr(tanbench.simulation, "simulate_vehicle", never)
+    cases = [
+        (simulated, [], f"{simulated}: holds a mission log already; give --force to overwrite it, or use a new "
+                        f"directory"),
+        (recorded, [], f"{recorded}: holds a recorded mission log (mission.yaml does not say source.kind: simulation), "
+                       f"which tanbench never overwrites; use a new directory"),
+        (recorded, ["--force"], "which tanbench never overwrites"),
+    ]
+    for directory, extra, message in cases:
+        result = CliRunner().invoke(app, ["simulate", "--area", "A", "--duration", "20", "--log", str(directory),
+                                          *extra])
+        assert result.exit_code != 0 and isinstance(result.exception, TanbenchError), result.output
+        assert message in str(result.exception) and "\n" not in str(result.exception)
+    assert {p: fingerprint(p) for p in (simulated, recorded)} == before
+    monkeypatch.setattr(tanbench.simulation, "simulate_vehicle", real)
+    result = CliRunner().invoke(app, ["simulate", "--area", "A", "--duration", "20", "--seed", "9", "--log",
+                                      str(simulated), "--force"])
+    assert result.exit_code == 0, result.output
+    assert read_log(simulated).meta.source["seed"] == 9 and (simulated / "map.npz").is_file()
+    assert fingerprint(recorded) == before[recorded]
+
+
+def test_the_new_refusals_are_one_line_exit_2_and_write_nothing(base, tmp_path):
+    """The CLI: a hole under the track, a sampling time longer than the log, a truncated CSV table, a negative range,
+    and simulate --log over an existing log: one error line, exit 2, no results directory, the log untouched."""
+    d, log, nmap = base
+    holes = holed(nmap, tmp_path / "loghole.npz", (slice(20, 60), slice(90, 150)))
+    (tmp_path / "long.yaml").write_text(yaml.safe_dump({"particles": 300, "sampling_time_s": 1000}))
+    write_log(tmp_path / "csv", log, "csv")
+    shutil.copytree(tmp_path / "csv", tmp_path / "cut")
+    (tmp_path / "cut" / "dvl.csv").write_text((tmp_path / "cut" / "dvl.csv").read_text()[:-30])
+    shutil.copytree(tmp_path / "csv", tmp_path / "negative")
+    dvl = pd.read_csv(tmp_path / "negative" / "dvl.csv")
+    dvl.assign(range_1_m=-5.0).to_csv(tmp_path / "negative" / "dvl.csv", index=False)
+    before = fingerprint(d / "log")
+    out = ["--out", tmp_path / "o"]
+    cases = [
+        (["replay", d / "log", "--map", holes, "--methods", "tight-dvl", "--settings", d / "settings.yaml", *out],
+         "the map has no data (a hole) under the navigation solution"),
+        (["replay", d / "log", "--map", d / "map.npz", "--methods", "tight-dvl", "--settings", tmp_path / "long.yaml",
+          *out], "sampling_time_s (1000 s) is longer than the span of the log's DVL pings (40 s)"),
+        (["replay", tmp_path / "cut", "--map", d / "map.npz", "--methods", "tight-dvl", *out],
+         "dvl.csv: row 40 (line 42) has 7 fields but the header has 8"),
+        (["replay", tmp_path / "negative", "--map", d / "map.npz", "--methods", "tight-dvl", *out],
+         "dvl.csv: range_1_m is -5 m at row 0"),
+        (["replay", tmp_path / "negative", "--map", d / "map.npz", "--methods", "tight-dvl"],  # default --out
+         "dvl.csv: range_1_m is -5 m at row 0"),
+        (["simulate", "--area", "A", "--duration", "20", "--log", d / "log"],
+         "holds a mission log already; give --force"),
+    ]
+    for args, message in cases:
+        proc = cli(*args, cwd=tmp_path)
+        lines = error_lines(proc.stderr)
+        assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), (args, proc.stderr)
+        assert message in lines[0], (message, lines[0])
+    assert not (tmp_path / "o").exists() and not (tmp_path / "results").exists()
+    assert fingerprint(d / "log") == before

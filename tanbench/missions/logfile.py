@@ -286,27 +286,50 @@ def _check_beam_blocks(log: MissionLog) -> None:
 # ---- writing -------------------------------------------------------------------------------
 
 
-def check_log_directory(directory: Path) -> None:
-    """Refuse a directory a mission log cannot be written into: a file, or a directory that holds something other
-    than a mission log (checked before the run is simulated, and again when it is written)."""
+def check_log_directory(directory: Path, overwrite: bool = False) -> None:
+    """Refuse a directory a mission log cannot be written into (checked before the run is simulated, and again when
+    it is written): a file; a directory that holds something other than a mission log; a mission log, unless
+    ``overwrite`` (``simulate --force``) and it is a simulated one (``source.kind: simulation``): a recorded log is
+    never overwritten."""
     if directory.exists() and not directory.is_dir():
         raise TanbenchError(f"{directory}: exists and is not a directory")
-    if directory.is_dir() and any(directory.iterdir()) and not (directory / META_FILE).is_file():
+    if not directory.is_dir() or not any(directory.iterdir()):
+        return
+    if not (directory / META_FILE).is_file():
         raise TanbenchError(f"{directory}: not empty and not a mission log; use a new directory")
+    if not _simulated(directory):
+        raise TanbenchError(f"{directory}: holds a recorded mission log ({META_FILE} does not say source.kind: "
+                            f"simulation), which tanbench never overwrites; use a new directory")
+    if not overwrite:
+        raise TanbenchError(f"{directory}: holds a mission log already; give --force to overwrite it, or use a new "
+                            f"directory")
 
 
-def write_log(directory, log: MissionLog, fmt: str = "parquet") -> list[Path]:
+def _simulated(directory: Path) -> bool:
+    """Whether the mission log in ``directory`` says it is a simulated run (what ``simulate --log`` writes)."""
+    import yaml
+
+    try:
+        meta = yaml.safe_load((directory / META_FILE).read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return False
+    source = meta.get("source") if isinstance(meta, dict) else None
+    return isinstance(source, dict) and source.get("kind") == "simulation"
+
+
+def write_log(directory, log: MissionLog, fmt: str = "parquet", overwrite: bool = False) -> list[Path]:
     """Write ``log`` into ``directory`` (tables as ``fmt``: parquet or csv); returns the files.
 
     Body-frame vectors are written in the metadata's ``body_frame``. A directory that holds anything but a mission
-    log is refused, and so is a table that reading would refuse for its ranges (nothing is written then).
+    log is refused, and so is a mission log unless ``overwrite`` and it is a simulated one
+    (:func:`check_log_directory`); so is a table that reading would refuse for its ranges (nothing is written then).
     """
     import yaml
 
     directory = Path(directory)
     if fmt not in ("parquet", "csv"):
         raise TanbenchError(f"mission-log tables are parquet or csv, not {fmt!r}")
-    check_log_directory(directory)
+    check_log_directory(directory, overwrite)
     for name, df in log.tables.items():
         for col in df.columns:
             if re.fullmatch(r"([a-z]+_)?range_\d+_m", col):
