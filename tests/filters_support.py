@@ -8,6 +8,7 @@ constants here.
 from __future__ import annotations
 
 import copy
+import sys
 
 import numpy as np
 
@@ -66,3 +67,64 @@ def snapshot(obj):
     return copy.deepcopy(obj)
 
 
+# --------------------------------------------------------------------------------------
+# the numpy references of whole loops (tests/test_*_reference*.py)
+# --------------------------------------------------------------------------------------
+JITTED_CALLED = "a jitted function was called from the numpy reference"
+
+
+def copy_of_rng(rng):
+    """An independent generator in the state of ``rng`` (fast words, Pcg64Stream or Generator)."""
+    from tanbench.filters.rng import rng_state
+
+    state = rng_state(rng)
+    if isinstance(state, np.ndarray):
+        return state
+    g = np.random.Generator(np.random.PCG64())
+    g.bit_generator.state = state
+    return g
+
+
+def same_rng_state(a, b) -> bool:
+    """Whether two generators (as :func:`copy_of_rng` takes them) are in the same state."""
+    from tanbench.filters.rng import rng_state
+
+    sa, sb = rng_state(a), rng_state(b)
+    return np.array_equal(sa, sb) if isinstance(sa, np.ndarray) else sa == sb
+
+
+def forbid_jitted_calls(mp) -> int:
+    """Replace every numba-jitted function a tanbench module holds by one that raises
+    AssertionError(:data:`JITTED_CALLED`) (``mp``: a pytest monkeypatch): a reference that called one,
+    directly or through a plain function, would fail. Returns how many were replaced."""
+    from numba.core.dispatcher import Dispatcher
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError(JITTED_CALLED)
+
+    replaced = 0
+    for modname, module in list(sys.modules.items()):
+        if modname.startswith("tanbench") and module is not None:
+            for attr, value in list(vars(module).items()):
+                if isinstance(value, Dispatcher):
+                    mp.setattr(module, attr, forbidden)
+                    replaced += 1
+    return replaced
+
+
+def assert_close_by_column(name, a, b, rtol, floor=0.0):
+    """``a`` against ``b`` (rows: updates or particles): integers exactly, floats within ``rtol`` of each
+    column's largest magnitude plus ``floor`` (per column)."""
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape, name
+    if a.dtype.kind == "i":
+        np.testing.assert_array_equal(a, b, err_msg=name)
+        return
+    a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
+    assert np.isfinite(a2).all() and np.isfinite(b2).all(), name
+    scale = np.abs(b2).max(axis=0)
+    bad = np.abs(a2 - b2) > rtol * scale + floor
+    if bad.any():
+        k, c = np.argwhere(bad)[0]
+        raise AssertionError(f"{name}: first difference beyond {rtol:g} of the column's scale at row {k}, column {c}: "
+                             f"{a2[k, c]!r} against the reference's {b2[k, c]!r} (scale {scale[c]:.3g})")

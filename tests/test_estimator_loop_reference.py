@@ -30,14 +30,14 @@ and the cases below keep to runs where the kernel is not that sensitive.
 
 from __future__ import annotations
 
-import sys
 from collections import namedtuple
 
 import numpy as np
 import pytest
 from numba.core.dispatcher import Dispatcher
 
-from filters_support import short_scenario
+from filters_support import (assert_close_by_column, copy_of_rng, forbid_jitted_calls, same_rng_state,
+                             short_scenario)
 from tanbench.filters import ekf, mpf, pmf, resample, tercom
 from tanbench.filters import estimator_reference as ref
 from tanbench.filters.beams import nav_frame_offsets
@@ -54,55 +54,6 @@ RTOL = 1e-9  # of each output column's largest magnitude (module docstring)
 DROPOUTS = {"dropout_rate_per_ping": 0.05}  # bottom-lock dropouts: beams and whole updates without a range
 
 
-def _same_state(a, b):
-    sa, sb = rng_state(a), rng_state(b)
-    return np.array_equal(sa, sb) if isinstance(sa, np.ndarray) else sa == sb
-
-
-def _copy_of(rng):
-    """An independent generator in the state of ``rng`` (fast words, Pcg64Stream or Generator)."""
-    state = rng_state(rng)
-    if isinstance(state, np.ndarray):
-        return state
-    g = np.random.Generator(np.random.PCG64())
-    g.bit_generator.state = state
-    return g
-
-
-def _forbid_jitted_calls(mp):
-    """Replace every numba-jitted function a tanbench module holds by one that raises: a reference that
-    called one, directly or through a plain function, would fail."""
-    def forbidden(*args, **kwargs):
-        raise AssertionError("a jitted function was called from the numpy reference")
-
-    replaced = 0
-    for modname, module in list(sys.modules.items()):
-        if modname.startswith("tanbench") and module is not None:
-            for attr, value in list(vars(module).items()):
-                if isinstance(value, Dispatcher):
-                    mp.setattr(module, attr, forbidden)
-                    replaced += 1
-    return replaced
-
-
-def _close(name, a, b, rtol, floor=0.0):
-    """``a`` against ``b`` (rows: updates or particles): integers exactly, floats within ``rtol`` of each
-    column's largest magnitude plus ``floor`` (per column)."""
-    a, b = np.asarray(a), np.asarray(b)
-    assert a.shape == b.shape, name
-    if a.dtype.kind == "i":
-        np.testing.assert_array_equal(a, b, err_msg=name)
-        return
-    a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
-    assert np.isfinite(a2).all() and np.isfinite(b2).all(), name
-    scale = np.abs(b2).max(axis=0)
-    bad = np.abs(a2 - b2) > rtol * scale + floor
-    if bad.any():
-        k, c = np.argwhere(bad)[0]
-        raise AssertionError(f"{name}: first difference beyond {rtol:g} of the column's scale at row {k}, column {c}: "
-                             f"{a2[k, c]!r} against the reference's {b2[k, c]!r} (scale {scale[c]:.3g})")
-
-
 def assert_outputs_close(got, want, rtol=RTOL):
     """Every output of a loop (a run's ``outputs``, ``finals`` and generators): each output field and final
     state (module docstring), then the generators' states (every draw the same). The outputs first: a
@@ -110,11 +61,11 @@ def assert_outputs_close(got, want, rtol=RTOL):
     est_scale = np.abs(want.outputs.est).max(axis=0)
     for field in got.outputs._fields:
         floor = (rtol * est_scale) ** 2 if field == "var" else 0.0
-        _close(field, getattr(got.outputs, field), getattr(want.outputs, field), rtol, floor)
+        assert_close_by_column(field, getattr(got.outputs, field), getattr(want.outputs, field), rtol, floor)
     for name, a in got.finals.items():
-        _close(name, a, want.finals[name], rtol)
+        assert_close_by_column(name, a, want.finals[name], rtol)
     if got.rng is not None:
-        assert _same_state(got.rng, want.rng), "the reference drew other random numbers"
+        assert same_rng_state(got.rng, want.rng), "the reference drew other random numbers"
 
 
 # --------------------------------------------------------------------------------------
@@ -225,7 +176,7 @@ def _mpf_reference(args):
 
 
 def _state_holder(state):
-    """A Generator in the PCG64 ``state`` (what ``_copy_of`` copies)."""
+    """A Generator in the PCG64 ``state`` (what ``copy_of_rng`` copies)."""
     g = np.random.Generator(np.random.PCG64())
     g.bit_generator.state = state
     return g
@@ -293,7 +244,7 @@ def runs():
 def _reference_run(case, args):
     """The reference's run, with every jitted function of tanbench's modules replaced by one that fails."""
     with pytest.MonkeyPatch.context() as mp:
-        _forbid_jitted_calls(mp)
+        forbid_jitted_calls(mp)
         return FAMILIES[CASES[case][0]].reference(args)
 
 
@@ -376,10 +327,10 @@ def _after_the_first(mutation):
 
 def test_the_references_run_without_jitted_functions():
     """What the loop comparisons rely on: the reference's module holds no jitted function, and inside
-    :func:`_forbid_jitted_calls` one called through its module fails (the kernels' modules lose theirs)."""
+    :func:`filters_support.forbid_jitted_calls` one called through its module fails (the kernels' modules lose theirs)."""
     assert not [name for name, value in vars(ref).items() if isinstance(value, Dispatcher)]
     with pytest.MonkeyPatch.context() as mp:
-        assert _forbid_jitted_calls(mp) > 100
+        assert forbid_jitted_calls(mp) > 100
         for call in (lambda: pmf.pmf_init(np.zeros((1, 2, 2)), np.zeros((1, 2)), np.zeros(1), 0.0, 0.0, 1.0),
                      lambda: tercom._best(np.zeros((1, 1, 1))),
                      lambda: resample.effective_sample_size(np.ones(4))):

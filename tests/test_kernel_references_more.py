@@ -30,6 +30,7 @@ import math
 import numpy as np
 import pytest
 
+from filters_support import JITTED_CALLED, forbid_jitted_calls
 from tanbench.filters import loose, pmf, propagate, trig
 from tanbench.filters import resample as rs
 from tanbench.filters import rng as fr
@@ -417,10 +418,6 @@ def test_references_call_no_jitted_function(monkeypatch):
     """Each reference of this file (and the replay of the draws) runs with every numba dispatcher that a
     tanbench module holds replaced by a function that raises: none of them calls compiled code, directly
     or through a helper."""
-    import sys
-
-    from numba.core.dispatcher import Dispatcher
-
     nav, inc, yaw_nav, up_nav = next(iter(navigation_cases()))
     resample_inputs = []
     for kind in ("liu-west", "gordon"):
@@ -429,14 +426,10 @@ def test_references_call_no_jitted_function(monkeypatch):
         for generator_kind in GENERATORS:
             resample_inputs.append((x0, w, logw0, ess, loop_generator(generator_kind, [SEED, 12]), bundle, dim, spread))
 
-    def jitted(*args, **kwargs):
-        raise AssertionError("a reference called a jitted function")
-
-    for module in [m for name, m in sys.modules.items() if name.startswith("tanbench") and m is not None]:
-        for attr, value in list(vars(module).items()):
-            if isinstance(value, Dispatcher):
-                monkeypatch.setattr(module, attr, jitted)
-    assert loose.position_reset is jitted and rs.fill_uniforms is jitted and fr.fill_normals is jitted
+    assert forbid_jitted_calls(monkeypatch) > 100
+    for kernel in (loose.position_reset, rs.fill_uniforms, fr.fill_normals):
+        with pytest.raises(AssertionError, match=JITTED_CALLED):
+            kernel()
     loose.position_reset_numpy(*next(iter(position_reset_cases())))
     loose.reopen_kf_numpy(*next(iter(reopen_cases())))
     loose.navigation_step_numpy(nav, inc, yaw_nav, up_nav)

@@ -21,13 +21,13 @@ one; the comparison would then fail at that update rather than drift.
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
 import pytest
 from numba.core.dispatcher import Dispatcher
 
-from filters_support import short_scenario
+from filters_support import (assert_close_by_column, copy_of_rng, forbid_jitted_calls, same_rng_state,
+                             short_scenario)
 from tanbench.config import Scenario
 from tanbench.filters import tight_reference as ref
 from tanbench.filters.cloud import uniform_horizontal, uniform_horizontal_numpy
@@ -52,22 +52,11 @@ def _stream(kind, seed):
     if kind == "generator":
         return np.random.default_rng(seed), np.random.default_rng(seed)
     rng = loop_rng(np.random.default_rng(seed), "fast" if kind == "fast" else "numpy")
-    return rng, _copy_of(rng)
+    return rng, copy_of_rng(rng)
 
 
-def _copy_of(rng):
-    """An independent generator in the state of ``rng`` (fast words, Pcg64Stream or Generator)."""
-    state = rng_state(rng)
-    if isinstance(state, np.ndarray):
-        return state
-    g = np.random.Generator(np.random.PCG64())
-    g.bit_generator.state = state
-    return g
 
 
-def _same_state(a, b):
-    sa, sb = rng_state(a), rng_state(b)
-    return np.array_equal(sa, sb) if isinstance(sa, np.ndarray) else sa == sb
 
 
 # --------------------------------------------------------------------------------------
@@ -86,7 +75,7 @@ def test_fill_numpy_draws_what_the_fills_draw(kind):
                 fill_uniforms(rng, got, -3.0, 5.5)
             want = fill_numpy(twin, (2, size), True) if normal else fill_numpy(twin, (2, size), False, -3.0, 5.5)
             np.testing.assert_array_equal(got, want, err_msg=f"size {size} normal {normal}")
-        assert _same_state(rng, twin)
+        assert same_rng_state(rng, twin)
 
 
 @pytest.mark.parametrize("kind", STREAMS)
@@ -112,7 +101,7 @@ def test_initial_clouds_equal_their_references(kind, m):
     xm = np.empty((N_MPF, m))
     init_mpf(xm, rng, 100.0, 200.0, -1.0, 75.0, 0.5, 4.0, 1e-8)
     np.testing.assert_array_equal(xm, init_mpf_numpy(xm, twin, 100.0, 200.0, -1.0, 75.0, 0.5, 4.0, 1e-8))
-    assert _same_state(rng, twin)
+    assert same_rng_state(rng, twin)
 
 
 # --------------------------------------------------------------------------------------
@@ -161,40 +150,26 @@ def _run_both(inputs):
     tanbench's modules replaced by one that fails."""
     x, rng, state, track, ranges, beams, grid, settings = inputs
     set_rng_state(rng, state)
-    x0, twin = x.copy(), _copy_of(rng)
+    x0, twin = x.copy(), copy_of_rng(rng)
     out = new_tight_outputs(ranges.shape[0])
     tight_filter_loop(x, rng, track, ranges, beams, grid, settings, out, None)
     assert np.array_equal(x, x0)  # the loop works on a copy
     with pytest.MonkeyPatch.context() as mp:
-        _forbid_jitted_calls(mp)
+        forbid_jitted_calls(mp)
         want = ref.tight_loop_numpy(x0, twin, track, ranges, beams, grid, settings)
     return out, rng, want, twin
 
 
-def _forbid_jitted_calls(mp):
-    """Replace every numba-jitted function a tanbench module holds by one that raises: a reference that
-    called one, directly or through a plain function, would fail."""
-    def forbidden(*args, **kwargs):
-        raise AssertionError("a jitted function was called from the numpy reference")
-
-    replaced = 0
-    for modname, module in list(sys.modules.items()):
-        if modname.startswith("tanbench") and module is not None:
-            for attr, value in list(vars(module).items()):
-                if isinstance(value, Dispatcher):
-                    mp.setattr(module, attr, forbidden)
-                    replaced += 1
-    return replaced
 
 
 def test_the_reference_runs_without_jitted_functions():
     """What the loop comparisons rely on: the reference's module holds no jitted function, and inside
-    :func:`_forbid_jitted_calls` one called through its module fails (the kernels' modules lose theirs)."""
+    :func:`filters_support.forbid_jitted_calls` one called through its module fails (the kernels' modules lose theirs)."""
     from tanbench.filters import tight as tight_module
 
     assert not [name for name, value in vars(ref).items() if isinstance(value, Dispatcher)]
     with pytest.MonkeyPatch.context() as mp:
-        assert _forbid_jitted_calls(mp) > 100
+        assert forbid_jitted_calls(mp) > 100
         with pytest.raises(AssertionError, match="jitted function was called"):
             tight_module.keep_on_map(np.zeros(2), np.array([1.0, 2.0, 1.0, 2.0]))
 
@@ -202,22 +177,9 @@ def test_the_reference_runs_without_jitted_functions():
 def assert_outputs_close(got, want, rng, twin, rtol=RTOL):
     """Every output of the loop: integers exactly, floats within ``rtol`` of each column's largest
     magnitude; the generators in the same state (every draw the same)."""
-    assert _same_state(rng, twin), "the reference drew other random numbers"
+    assert same_rng_state(rng, twin), "the reference drew other random numbers"
     for field in got._fields:
-        a, b = np.asarray(getattr(got, field)), np.asarray(getattr(want, field))
-        assert a.shape == b.shape, field
-        if a.dtype.kind == "i":
-            np.testing.assert_array_equal(a, b, err_msg=field)
-            continue
-        a2, b2 = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
-        assert np.isfinite(a2).all() and np.isfinite(b2).all(), field
-        scale = np.abs(b2).max(axis=0)
-        bad = np.abs(a2 - b2) > rtol * scale
-        if bad.any():
-            k, c = np.argwhere(bad)[0]
-            raise AssertionError(f"{field}: first difference beyond {rtol:g} of the column's scale at update {k}, "
-                                 f"column {c}: {a2[k, c]!r} against the reference's {b2[k, c]!r} "
-                                 f"(scale {scale[c]:.3g})")
+        assert_close_by_column(field, getattr(got, field), getattr(want, field), rtol)
 
 
 @pytest.fixture(scope="module")
