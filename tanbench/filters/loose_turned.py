@@ -62,8 +62,8 @@ import numpy as np
 from tanbench.filters import FASTMATH
 from tanbench.filters.cloud import uniform_horizontal
 from tanbench.filters.estimate import weighted_estimate
-from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_pass, new_likelihood_work,
-                                        work_block)
+from tanbench.filters.likelihood import (BLOCK, beam_constants, beam_vectors, loglik_tight_numpy, loglik_tight_pass,
+                                        new_likelihood_work, work_block)
 from tanbench.filters.loose import navigation_step, position_reset, record_kalman_update, reopen_kf
 from tanbench.filters.resample import add_log_weights, normalise_with_ess, resample_and_regularise
 from tanbench.filters.rng import fill_normals
@@ -218,6 +218,19 @@ def fit_without_worst_beam_numpy(per_beam_fits):
     if f.size >= 3:
         return float((f.sum() - f.max()) / (f.size - 1))
     return float(f.mean()) if f.size else np.inf
+
+
+def best_particle_fit_numpy(x, ll, beams, ranges, zmap, mvar, lik, sig_u, outside_sigma):
+    """Plain-numpy reference of the whole :func:`fit_without_worst_beam` with ``vec`` = ``beam_vectors(beams,
+    ranges)`` (the map as ``likelihood.loglik_tight_numpy`` takes it): the particle of ``x`` (8, M) with the largest
+    log-likelihood ``ll`` (the first of equals), each beam with a range alone through ``loglik_tight_numpy`` on it
+    (one particle, one beam: its d^2 / v), then :func:`fit_without_worst_beam_numpy`."""
+    j = int(np.argmax(ll))
+    one = np.asarray(x, dtype=float)[:, j:j + 1]
+    ranges = np.asarray(ranges, dtype=float)
+    fits = [loglik_tight_numpy(one, beams[i:i + 1], ranges[i:i + 1], zmap, mvar, lik, sig_u, outside_sigma, None,
+                               1.0)[1] for i in np.flatnonzero(~np.isnan(ranges))]
+    return fit_without_worst_beam_numpy(fits)
 
 
 @nb.njit(cache=True)
