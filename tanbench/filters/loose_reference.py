@@ -195,6 +195,19 @@ def loose_filter_loop_numpy(x, rng, track, offsets, grid, settings):
 # --------------------------------------------------------------------------------------
 # Kalman feedback
 # --------------------------------------------------------------------------------------
+def _navigation_start(start_en, nav_yaw):
+    """The corrected navigation at the start, as one tight particle (8, 1)."""
+    nav = np.zeros((N_TIGHT, 1))
+    nav[E, 0], nav[N, 0], nav[YAW, 0] = start_en[0], start_en[1], nav_yaw[0]
+    return nav
+
+
+def _kf_constants(p, div, kf):
+    """The Kalman loops' constants: the initial position and heading variances (a reopened KF's), the
+    consistent fit's chi-square and the fixes' floor covariance."""
+    return p[EE, EE], p[EPSI, EPSI], (0.5 * div.sigma) ** 2, np.eye(2) * (kf.r_floor * kf.r_floor)
+
+
 def loose_kalman_loop_numpy(x, rng, track, offsets, grid, settings, p_kf, start_en):
     """Plain-numpy reference of ``loose_kalman_loop(x, rng, track, offsets, grid, settings, p_kf, out)`` with
     ``out.en[0]`` = ``start_en`` (module docstring): returns (the :class:`~tanbench.filters.loose.KalmanOutputs`
@@ -210,15 +223,12 @@ def loose_kalman_loop_numpy(x, rng, track, offsets, grid, settings, p_kf, start_
     steps = offsets.shape[0]
     out = _kalman_outputs(steps)
     m_prior, p_prior = _window(start_en[0], start_en[1], half_side)
-    nav = np.zeros((N_TIGHT, 1))  # the corrected navigation, as one tight particle
-    nav[E, 0], nav[N, 0], nav[YAW, 0] = start_en[0], start_en[1], nav_yaw[0]
+    nav = _navigation_start(start_en, nav_yaw)
     logw = np.zeros(m)
     bad = good = since_fix = rejections = 0
     first_fix = True
     locked = False
-    p0_pos, p0_yaw = p[EE, EE], p[EPSI, EPSI]
-    consistent_chi = (0.5 * div.sigma) ** 2
-    floor = np.eye(2) * (kf.r_floor * kf.r_floor)
+    p0_pos, p0_yaw, consistent_chi, floor = _kf_constants(p, div, kf)
     for k in range(steps):
         if k > 0:
             nav, d_e, d_n, b_e, b_n = navigation_step_numpy(nav, inc[k - 1], nav_yaw[k - 1], nav_up[k - 1])
@@ -304,8 +314,7 @@ def loose_turned_loop_numpy(x, rng, track, grid, settings, gates, p_kf, start_en
     m = np.shape(x)[1]
     steps = ranges.shape[0]
     out = _kalman_outputs(steps)
-    nav = np.zeros((N_TIGHT, 1))
-    nav[E, 0], nav[N, 0], nav[YAW, 0] = start_en[0], start_en[1], nav_yaw[0]
+    nav = _navigation_start(start_en, nav_yaw)
     heading_std = math.sqrt(p[EPSI, EPSI])
     cloud = np.zeros((N_TIGHT, m))  # the loop's rows other than E and N zeroed, then its headings drawn
     cloud[[E, N]] = np.asarray(x, dtype=float)[[E, N]]
@@ -316,9 +325,7 @@ def loose_turned_loop_numpy(x, rng, track, grid, settings, gates, p_kf, start_en
     bad = good = since_fix = rejections = 0
     first_fix = True
     locked = False
-    p0_pos, p0_yaw = p[EE, EE], p[EPSI, EPSI]
-    consistent_chi = (0.5 * div.sigma) ** 2
-    floor = np.eye(2) * (kf.r_floor * kf.r_floor)
+    p0_pos, p0_yaw, consistent_chi, floor = _kf_constants(p, div, kf)
     for k in range(steps):
         if k > 0:
             yaw_before = nav[YAW, 0]
