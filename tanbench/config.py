@@ -32,7 +32,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
                               LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK,
-                              LOOSE_REOPEN_HEADING, LOOSE_REOPEN_POSITION, MAP_REPRESENTATION, MULTIBEAM_PATTERN,
+                              LOOSE_REOPEN_HEADING, LOOSE_REOPEN_POSITION, MAP_REPRESENTATION, MAX_SEED,
+                              MULTIBEAM_PATTERN,
                               POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, RECOVERY_SEARCH_AROUND,
                               RECOVERY_SECOND_AMBIGUITY, REGULARISATION, REGULARISED_STATES, RESAMPLING,
                               TIGHT_REGULARISATION, choices)
@@ -163,7 +164,7 @@ class TerrainSpec(_Strict):
     """Where the seafloor comes from: the built-in synthetic maps or a bathymetry file."""
 
     kind: Literal["synthetic", "file"] = "synthetic"
-    seed: int = Field(1, ge=0, description="synthetic seafloor seed")
+    seed: int = Field(1, ge=0, le=MAX_SEED, description="synthetic seafloor seed")
     layout: Literal["auto", "paper", "vehicle-run"] = Field(
         "auto", description="synthetic layout; auto = 'vehicle-run' for area vehicle, else 'paper'")
     truth_resolution_m: float = Field(2.5, gt=0, le=10, description="synthetic truth grid spacing")

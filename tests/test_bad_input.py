@@ -211,6 +211,8 @@ CASES = [
     # a seed beyond int64 was stored once, then made `run` again, `plan` and `replay` fail (found by an audit)
     case("seed-beyond-int64", ["run", "{sweep}", "--out", "{tmp}/out"], sweep(seed=2**64 + 1),
          "seed: Input should be less than or equal to 9223372036854775807"),
+    case("terrain-seed-beyond-int64", ["run", "{sweep}", "--out", "{tmp}/out"], sweep(scenario__terrain={
+         "kind": "synthetic", "seed": 2**64}), "scenario.terrain.seed: Input should be less than or equal to"),
     case("simulate-seed-beyond-int64", ["simulate", "--seed", str(2**63), "--out", "{tmp}/run.csv"], None,
          "Invalid value for '--seed'"),
     case("missing-seed-and-runs", ["validate", "{sweep}"], sweep("seed", "runs"),
