@@ -33,10 +33,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 from tanbench.options import (COLLAPSE_REINIT, DISTANCE_INNOVATION, GYRO_BIAS_NOISE, INITIAL_CLOUD, LIKELIHOOD,
                               LIKELIHOOD_R, LOOSE_ARCHITECTURE, LOOSE_FIRST_FIX, LOOSE_FIX_PRIOR_FALLBACK,
                               LOOSE_REOPEN_HEADING, LOOSE_REOPEN_POSITION, MAP_REPRESENTATION, MAX_SEED,
-                              MULTIBEAM_PATTERN,
-                              POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY, RECOVERY_SEARCH_AROUND,
-                              RECOVERY_SECOND_AMBIGUITY, REGULARISATION, REGULARISED_STATES, RESAMPLING,
-                              TIGHT_REGULARISATION, choices)
+                              MULTIBEAM_PATTERN, POSITION_NOISE_GROWTH, PROPAGATION, RANGE_NOISE, RECOVERY,
+                              RECOVERY_SEARCH_AROUND, RECOVERY_SECOND_AMBIGUITY, REGULARISATION, REGULARISED_STATES,
+                              RESAMPLING, TIGHT_REGULARISATION, choices)
 from tanbench.paperdata import scenario_facts
 from tanbench.units import DEG_PER_H, DEG_PER_SQRT_H
 
