@@ -324,8 +324,11 @@ def test_the_hole_check_reads_the_navigation_solution_not_the_reference(base, tm
 
 
 def test_the_hole_check_is_the_sweep_s_without_a_margin():
-    """One piece of code: over_holes with no margin is the bilinear look-up's NaN, and with a margin it says which
-    points find_holes would find a hole around."""
+    """One piece of code: without a margin the check is the bilinear look-up's NaN itself, on node lines too
+    (over_holes' boxes divide by the spacing where the look-up multiplies by its inverse, so on a node line the
+    two can pick neighbouring cells; found by the review), and over_holes agrees with it off them; with a margin
+    over_holes says which points find_holes would find a hole around."""
+    from tanbench.simulation import check_no_holes
     from tanbench.terrain.grid import Map
     from tanbench.terrain.mosaic import find_holes, over_holes
 
@@ -338,6 +341,20 @@ def test_the_hole_check_is_the_sweep_s_without_a_margin():
     np.testing.assert_array_equal(over_holes(m, e, n)[inside], np.isnan(m.elevation(e, n))[inside])
     for margin in (0.0, 3.0, 12.5):
         assert list(over_holes(m, e, n, margin)) == [bool(find_holes(m, a, b, margin)) for a, b in zip(e, n)]
+    # points on node lines (e0 and the spacings chosen so that fx, fy round): the check refuses exactly where the
+    # look-up reads NaN
+    odd = Map(z, -13.0, -7.0, 3.3, 2.7, name="odd")
+    jj, ii = np.meshgrid(np.arange(40), np.arange(30))
+    e_line, n_line = (-13.0 + 3.3 * jj).ravel(), (-7.0 + 2.7 * ii).ravel()
+    lookup = np.isnan(odd.elevation(e_line, n_line)) & odd.contains(e_line, n_line)
+    assert lookup.any() and not lookup.all()
+    for k in range(e_line.size):
+        refused = False
+        try:
+            check_no_holes(odd, np.zeros(1), e_line[k:k + 1], n_line[k:k + 1], "terrain.fill_holes: true")
+        except TanbenchError:
+            refused = True
+        assert refused == lookup[k], (e_line[k], n_line[k])
 
 
 def test_replay_refuses_a_sampling_time_longer_than_the_log(base, tmp_path):
