@@ -107,8 +107,7 @@ def reopen_cases():
 def test_reopen_kf_matches_numpy():
     for case in reopen_cases():
         check_reopen_kf(*case)
-    # the heading variance is set to a quarter of the initial one even when the KF's was larger (what
-    # the kernel does; its docstring reads "to at least a quarter")
+    # the heading variance is set to a quarter of the initial one even when the KF's was larger
     p = np.diag([1.0, 1.0, 4.0, 1e-9])
     loose.reopen_kf(p, 100.0, 1.0)
     assert p[EPSI, EPSI] == 0.25 and p[EB, EB] == 1e-9

@@ -304,10 +304,13 @@ def test_the_references_run_without_jitted_functions():
 
 
 def test_a_wound_yaw_is_refused():
-    """The turned loop's reference refuses a cloud whose yaw is wound beyond trig.WOUND / 2 from the heading."""
+    """The loop references refuse a cloud whose yaw is wound beyond trig.WOUND / 2 from the heading
+    (``tight_reference.check_not_wound``, which the turned loop's reference calls)."""
     with pytest.raises(ValueError, match="wound"):
-        ref._check_not_wound(np.array([0.1, 1e5]), 0.0, 3)
-    ref._check_not_wound(np.array([0.1, -4e4]), 0.0, 3)
+        ref.check_not_wound(3, (np.array([0.1, 1e5]), 0.0))
+    with pytest.raises(ValueError, match="wound"):
+        ref.check_not_wound(3, (np.array([0.1, np.nan]), 0.0))
+    ref.check_not_wound(3, (np.array([0.1, -4e4]), 0.0))
 
 
 # --------------------------------------------------------------------------------------

@@ -59,8 +59,7 @@ from tanbench.filters.resample import normalize_log_weights_numpy, resample_and_
 from tanbench.filters.rng import fill_numpy
 from tanbench.filters.tercom import (MSD, TercomOutputs, best_numpy, collect_numpy, profile_surface_numpy,
                                      surface_likelihood_moments_numpy)
-from tanbench.filters.tight_reference import grid_maps
-from tanbench.filters.trig import WOUND
+from tanbench.filters.tight_reference import check_not_wound, grid_maps, loop_draw
 from tanbench.terrain.grid import MapArgs
 
 
@@ -271,12 +270,6 @@ def ekf_loop_numpy(x, p, inc_d0, inc_sz, offsets, nav_up, zmap, settings):
 # --------------------------------------------------------------------------------------
 # marginalized PF
 # --------------------------------------------------------------------------------------
-def _check_yaw_not_wound(x, nav_yaw, k):
-    if not (np.abs(x[PSI] - nav_yaw) < WOUND / 2.0).all():
-        raise ValueError(f"update {k}: a particle's yaw is wound (or NaN) beyond WOUND / 2 from the navigation's; "
-                         "the kernels then take pseudo-random directions, which this reference does not follow")
-
-
 def mpf_loop_numpy(x, rng, track, offsets, zmap, settings):
     """Plain-numpy reference of ``mpf_loop(x, rng, track, offsets, zmap, settings, out)`` (module docstring):
     returns (the :class:`~tanbench.filters.mpf.MpfOutputs` the loop fills, the cloud the loop leaves in
@@ -294,10 +287,10 @@ def mpf_loop_numpy(x, rng, track, offsets, zmap, settings):
     bad = 0
     for k in range(steps):
         if k > 0:
-            _check_yaw_not_wound(x, nav_yaw[k - 1], k)
+            check_not_wound(k, (x[PSI], nav_yaw[k - 1]))
             x = mpf_propagate_numpy(x, inc[k - 1], nav_yaw[k - 1], fill_numpy(rng, (3, m), True), sig_pos, q_psi,
                                     q_eps, q_b)
-        _check_yaw_not_wound(x, nav_yaw[k], k)
+        check_not_wound(k, (x[PSI], nav_yaw[k]))
         ll, best, x = mpf_loglik_update_numpy(x, offsets[k], nav_up[k], nav_yaw[k], *zmap, sig_u, outside_sigma)
         logw = logw + ll
         w, _ = normalize_log_weights_numpy(logw)
@@ -314,7 +307,7 @@ def mpf_loop_numpy(x, rng, track, offsets, zmap, settings):
             bad = 0
             out.reinit[k] = 1
             continue
-        x, logw = resample_and_regularise_numpy(x, w, logw, ess, lambda count, normal: fill_numpy(rng, count, normal), rs, 3,
+        x, logw = resample_and_regularise_numpy(x, w, logw, ess, loop_draw(rng), rs, 3,
                                                  math.sqrt(v[E] + v[N]))
     return out, x
 

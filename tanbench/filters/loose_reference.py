@@ -64,7 +64,7 @@ import numpy as np
 
 from tanbench.filters.cloud import gaussian_horizontal_numpy, uniform_horizontal_numpy
 from tanbench.filters.estimate import weighted_estimate_numpy
-from tanbench.filters.likelihood import BLOCK, Likelihood, loglik_loose_numpy, loglik_tight_numpy
+from tanbench.filters.likelihood import Likelihood, loglik_loose_numpy, loglik_tight_numpy
 from tanbench.filters.loose import (FixOnlyOutputs, KalmanOutputs, advance_window_prior_numpy, navigation_step_numpy,
                                     position_reset_numpy, reopen_kf_numpy)
 from tanbench.filters.loose_turned import (best_particle_fit_numpy, cloud_heading_offset_numpy,
@@ -74,8 +74,7 @@ from tanbench.filters.resample import normalize_log_weights_numpy, resample_and_
 from tanbench.filters.rng import fill_numpy
 from tanbench.filters.state import BZ, E, N, N_TIGHT, PITCH, ROLL, U, YAW
 from tanbench.filters.tight import keep_on_map_numpy
-from tanbench.filters.tight_reference import grid_maps
-from tanbench.filters.trig import WOUND
+from tanbench.filters.tight_reference import block_normals, check_not_wound, grid_maps, loop_draw
 from tanbench.navigation.eskf import (EB, EE, EN, EPSI, eskf_predict_numpy, eskf_update_numpy, fix_prior_chi2_numpy,
                                       terrain_only_fix_numpy)
 from tanbench.navigation.increments import SZ
@@ -86,18 +85,6 @@ PLAIN = Likelihood(False, 0, 4.0)  # the fix-only loop's density: the plain Gaus
 # --------------------------------------------------------------------------------------
 # what the loops share
 # --------------------------------------------------------------------------------------
-def _block_normals(rng, rows, m):
-    """The (rows, m) standard normals a loop draws for its particles block by block (``likelihood.BLOCK``): one
-    fill of (rows, n) per block, the blocks side by side."""
-    block = min(BLOCK, m)
-    return np.concatenate([fill_numpy(rng, (rows, min(block, m - lo)), True) for lo in range(0, m, block)], axis=1)
-
-
-def _drawer(rng):
-    """``draw(n, normal)`` as ``resample_and_regularise_numpy`` takes it: the loop's generator's next fill."""
-    return lambda count, normal: fill_numpy(rng, count, normal)
-
-
 def _weigh(logw, ll):
     """The log-weights after an update's log-likelihoods, the normalised weights and the ESS (``add_log_weights``,
     ``normalise_with_ess``)."""
@@ -147,7 +134,7 @@ def loose_filter_loop_numpy(x, rng, track, offsets, grid, settings):
     d0, nav_en, nav_up = track
     model, rs, div, half_side, readings = settings
     zmap, mvar = grid_maps(grid)
-    draw = _drawer(rng)
+    draw = loop_draw(rng)
     x = np.array(x, dtype=float)
     m = x.shape[1]
     steps = offsets.shape[0]
@@ -159,7 +146,7 @@ def loose_filter_loop_numpy(x, rng, track, offsets, grid, settings):
     consistent_chi = (0.5 * div.sigma) ** 2
     for k in range(steps):
         if k > 0:
-            x = propagate_loose_numpy(x, d0[k - 1, 0], d0[k - 1, 1], _block_normals(rng, 3, m), model.sig_pos,
+            x = propagate_loose_numpy(x, d0[k - 1, 0], d0[k - 1, 1], block_normals(rng, 3, m), model.sig_pos,
                                       model.sig_heading)
         ll, best = loglik_loose_numpy(x, offsets[k], nav_up[k], zmap, mvar, PLAIN, model.sig_u, model.outside_sigma)
         logw, w, ess = _weigh(logw, ll)
@@ -216,7 +203,7 @@ def loose_kalman_loop_numpy(x, rng, track, offsets, grid, settings, p_kf, start_
     inc, nav_yaw, nav_up = track
     model, rs, div, half_side, lik, guard, kf = settings
     zmap, mvar = grid_maps(grid)
-    draw = _drawer(rng)
+    draw = loop_draw(rng)
     x = np.array(x, dtype=float)
     p = np.array(p_kf, dtype=float)
     m = x.shape[1]
@@ -235,7 +222,7 @@ def loose_kalman_loop_numpy(x, rng, track, offsets, grid, settings, p_kf, start_
             sig_heading = math.sqrt(p[EPSI, EPSI])
             p = eskf_predict_numpy(p, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
             m_prior, p_prior = advance_window_prior_numpy(m_prior, p_prior, d_e, d_n, model.sig_pos, sig_heading)
-            x = propagate_loose_numpy(x, d_e, d_n, _block_normals(rng, 3, m), model.sig_pos, sig_heading)
+            x = propagate_loose_numpy(x, d_e, d_n, block_normals(rng, 3, m), model.sig_pos, sig_heading)
         # the beams turned by the corrected heading's offset from the navigation heading
         turn = nav[YAW, 0] - nav_yaw[k]
         c, s = math.cos(turn), math.sin(turn)
@@ -292,13 +279,6 @@ def loose_kalman_loop_numpy(x, rng, track, offsets, grid, settings, p_kf, start_
 # --------------------------------------------------------------------------------------
 # Kalman feedback with heading-offset particles
 # --------------------------------------------------------------------------------------
-def _check_not_wound(yaw, ref, k):
-    if not (np.abs(np.asarray(yaw) - ref) < WOUND / 2.0).all():
-        raise ValueError(f"update {k}: a particle's yaw is wound (or NaN) beyond WOUND / 2 from the corrected "
-                         "heading; the kernels then take pseudo-random directions, which this reference does not "
-                         "follow")
-
-
 def loose_turned_loop_numpy(x, rng, track, grid, settings, gates, p_kf, start_en):
     """Plain-numpy reference of ``loose_turned_loop(x, rng, track, grid, settings, gates, p_kf, out)`` with
     ``out.en[0]`` = ``start_en`` (module docstring): returns (the :class:`~tanbench.filters.loose.KalmanOutputs`
@@ -309,7 +289,7 @@ def loose_turned_loop_numpy(x, rng, track, grid, settings, gates, p_kf, start_en
     (bias_limit, shape_min, dt, prior_gate, prior_fallback, fit_test, fit_neutral, first_posterior, reopen_cloud,
      reopen_reset) = gates
     zmap, mvar = grid_maps(grid)
-    draw = _drawer(rng)
+    draw = loop_draw(rng)
     p = np.array(p_kf, dtype=float)
     m = np.shape(x)[1]
     steps = ranges.shape[0]
@@ -334,13 +314,13 @@ def loose_turned_loop_numpy(x, rng, track, grid, settings, gates, p_kf, start_en
             q_delta = math.sqrt(kf.q_yaw * kf.q_yaw + p[EB, EB] * dt * dt)
             p = eskf_predict_numpy(p, d_e, d_n, b_e, b_n, inc[k - 1, SZ], kf.q_pos, kf.q_yaw, kf.q_bias)
             for cloud in (x, xp):
-                _check_not_wound(cloud[YAW], yaw_before, k)
-            x = propagate_loose_turned_numpy(x, d_e, d_n, yaw_before, dyaw, _block_normals(rng, 3, m), model.sig_pos,
+                check_not_wound(k, (cloud[YAW], yaw_before))
+            x = propagate_loose_turned_numpy(x, d_e, d_n, yaw_before, dyaw, block_normals(rng, 3, m), model.sig_pos,
                                              q_delta)
-            xp = propagate_loose_turned_numpy(xp, d_e, d_n, yaw_before, dyaw, _block_normals(rng, 3, m),
+            xp = propagate_loose_turned_numpy(xp, d_e, d_n, yaw_before, dyaw, block_normals(rng, 3, m),
                                               model.sig_pos, q_delta)
         x[U], x[PITCH], x[ROLL] = nav_up[k], nav_pitch[k], nav_roll[k]
-        _check_not_wound(x[YAW], nav[YAW, 0], k)
+        check_not_wound(k, (x[YAW], nav[YAW, 0]))
         ll, best = loglik_tight_numpy(x, beams, ranges[k], zmap, mvar, lik, model.sig_u, model.outside_sigma, None, 1.0)
         logw, w, ess = _weigh(logw, ll)
         mean, v, cov = weighted_estimate_numpy(x[:2], w, -1, 0.0)

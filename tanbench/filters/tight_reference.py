@@ -104,12 +104,28 @@ def grid_maps(grid):
     return zmap, (np.ascontiguousarray(nodes[..., 1]) if grid.grids == 2 else None)
 
 
-def _check_not_wound(x, pitch, roll, yaw, k):
-    offsets = np.abs(np.stack([x[PITCH] - pitch, x[ROLL] - roll, x[YAW] - yaw]))
-    if not (offsets < WOUND / 2.0).all():
-        raise ValueError(f"update {k}: a particle's attitude is wound (or NaN) beyond WOUND / 2 from the "
-                         "navigation's; the kernels then take pseudo-random directions, which this reference "
-                         "does not follow")
+def check_not_wound(k, *angles):
+    """Refuse (ValueError) an update ``k`` where a particle's angle is wound (or NaN) WOUND / 2 or more from its
+    reference: ``angles`` are (the particles' angles, the reference) pairs. The kernels then take pseudo-random
+    directions (``trig.wound_angle``), which the loop references do not follow."""
+    for values, reference in angles:
+        if not (np.abs(np.asarray(values) - reference) < WOUND / 2.0).all():
+            raise ValueError(f"update {k}: a particle's attitude is wound (or NaN) beyond WOUND / 2 from the "
+                             "navigation's; the kernels then take pseudo-random directions, which this reference "
+                             "does not follow")
+
+
+def block_normals(rng, rows, m):
+    """The (rows, m) standard normals a loop draws for its particles block by block (``likelihood.BLOCK``): one
+    fill of (rows, n) per block (``rng.fill_numpy``, ``rng`` advanced in place), the blocks side by side."""
+    block = min(BLOCK, m)
+    return np.concatenate([fill_numpy(rng, (rows, min(block, m - lo)), True) for lo in range(0, m, block)], axis=1)
+
+
+def loop_draw(rng):
+    """``draw(n, normal)`` as ``resample.resample_and_regularise_numpy`` takes it: the loop's generator's next fill
+    (``rng`` advanced in place)."""
+    return lambda count, normal: fill_numpy(rng, count, normal)
 
 
 def tight_loop_numpy(x, rng, track, ranges, beams, grid, settings, search=None) -> TightOutputs:
@@ -128,7 +144,6 @@ def tight_loop_numpy(x, rng, track, ranges, beams, grid, settings, search=None) 
     out = TightOutputs(np.empty((steps, N_TIGHT)), np.empty((steps, N_TIGHT)), np.empty(steps), np.empty(steps),
                        np.zeros(steps, dtype=np.int64), np.zeros(steps, dtype=np.int64),
                        np.ones(steps, dtype=np.int64), np.full(steps, m, dtype=np.int64))
-    block = min(BLOCK, m)
     walk = model.sig_bias > 0.0
     noise_rows = 8 if walk else 6
     with_dist = model.dist_mode == DIST_NAVIGATION
@@ -142,15 +157,14 @@ def tight_loop_numpy(x, rng, track, ranges, beams, grid, settings, search=None) 
         if k > 0:
             dr_e += inc[k - 1, D0E]
             dr_n += inc[k - 1, D0N]
-            _check_not_wound(x, nav_pitch[k - 1], nav_roll[k - 1], nav_yaw[k - 1], k)
+            check_not_wound(k, (x[PITCH], nav_pitch[k - 1]), (x[ROLL], nav_roll[k - 1]), (x[YAW], nav_yaw[k - 1]))
             # the noise of each block of the cloud, one fill a block: (rows, n) in row order
-            noise = np.concatenate([fill_numpy(rng, (noise_rows, min(block, m - lo)), True)
-                                    for lo in range(0, m, block)], axis=1)
+            noise = block_normals(rng, noise_rows, m)
             x, dist = propagate_tight_numpy(x, inc[k - 1], nav_yaw[k - 1], noise[:6], model.sig_pos, model.sig_up,
                                             model.sig_att, model.dist_mode)
             if walk:
                 x = walk_biases_numpy(x, noise[6], noise[7], model.sig_bias)
-        _check_not_wound(x, nav_pitch[k], nav_roll[k], nav_yaw[k], k)
+        check_not_wound(k, (x[PITCH], nav_pitch[k]), (x[ROLL], nav_roll[k]), (x[YAW], nav_yaw[k]))
         ll, best = loglik_tight_numpy(x, beams, ranges[k], zmap, mvar, lik, model.sig_u, model.outside_sigma,
                                       dist if (with_dist and k > 0) else None, model.sig_d)
         logw = logw + ll
