@@ -226,3 +226,36 @@ def test_until_decisive_is_deterministic_and_spends_alpha_over_its_looks(tmp_pat
     assert lines == lines2 and lines[0].startswith("look 1/2: 4 runs per cell, level 0.025")
     cols = ["metric", "n_new", "change", "p_worse", "verdict"]
     assert first.table[cols].equals(again.table[cols])
+
+
+PLUG = """import numpy as np
+OFFSET = {offset}
+
+
+def run(ctx):
+    k = ctx.updates.imu
+    return {{"east": ctx.nav.pos[k, 0] + OFFSET, "north": ctx.nav.pos[k, 1]}}
+"""
+
+
+def test_until_decisive_refuses_a_baseline_its_code_would_recompute(tmp_path):
+    """A plug-in edited after the baseline was stored: extending the baseline would recompute its runs with the
+    new code, and the check would compare the new code with itself (found by a user's audit: a bug that lost 45 %
+    of runs passed). Refused, one line, and the baseline's runs are left as they were."""
+    from sweep_support import cli, error_lines, sweep_dict, write_sweep
+
+    (tmp_path / "plugx").mkdir()
+    (tmp_path / "plugx" / "__init__.py").write_text("")
+    (tmp_path / "plugx" / "m.py").write_text(PLUG.format(offset=0.0))
+    sweep = write_sweep(tmp_path / "s.yaml", sweep_dict(name="plug", runs=2, methods=["plugx.m:run"], tables={},
+                                                       scenario={"duration_s": 60, "particles": 60}))
+    for name in ("base", "new"):
+        proc = cli("run", sweep, "--out", tmp_path / name, "--workers", 1, "-q", extra_path=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+    (tmp_path / "plugx" / "m.py").write_text(PLUG.format(offset=5.0))
+    before = sorted((p, p.stat().st_mtime_ns) for p in (tmp_path / "base" / "runs").rglob("*.parquet"))
+    proc = cli("check", tmp_path / "new", tmp_path / "base", "--until-decisive", extra_path=tmp_path)
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    lines = error_lines(proc.stderr)
+    assert len(lines) == 1 and "would be recomputed by the code here" in lines[0] and "plugx.m:run (code)" in lines[0]
+    assert sorted((p, p.stat().st_mtime_ns) for p in (tmp_path / "base" / "runs").rglob("*.parquet")) == before

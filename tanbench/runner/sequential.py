@@ -21,12 +21,26 @@ from tanbench.check import CheckOptions, CheckResult, compare, looks, spend
 from tanbench.errors import TanbenchError
 from tanbench.results import load
 from tanbench.runner.engine import run_sweep
+from tanbench.runner.resume import ResumeState
 from tanbench.sweep import load_sweep
 
 
 def _stored_runs(directory: Path) -> int:
     runs = load(directory)
     return int(runs.groupby(["cell_id", "method"])["run"].nunique().min())
+
+
+def _check_nothing_stale(sweep, directory: Path) -> None:
+    """Refuse to extend a directory whose stored runs would come out differently now (another method code,
+    e.g. a plug-in edited since, or other seeds or map): extending would recompute them, and a baseline would
+    silently become the new code's (found by a user's audit: the check then compared a bug with itself)."""
+    stale = ResumeState.read(sweep, directory, "none").stale()
+    if len(stale):
+        why = ", ".join(f"{method} ({', '.join(sorted(set(group['stale'])))})"
+                        for method, group in stale.groupby("method"))
+        raise TanbenchError(f"{directory}: {len(stale)} stored run(s) would be recomputed by the code here, "
+                            f"not extended: {why}; --until-decisive only adds runs made as the stored ones were "
+                            f"(rerun that directory with its own code first, or check without --until-decisive)")
 
 
 def until_decisive(new_dir, base_dir, options: CheckOptions, batch: int, cap: int, echo=print) -> CheckResult:
@@ -37,6 +51,8 @@ def until_decisive(new_dir, base_dir, options: CheckOptions, batch: int, cap: in
         if not (d / "sweep.yaml").is_file():
             raise TanbenchError(f"{d}: no sweep.yaml; --until-decisive extends a directory with its own sweep")
         sweeps.append(load_sweep(d / "sweep.yaml"))
+    for sweep, d in zip(sweeps, dirs):
+        _check_nothing_stale(sweep, d)
     start = max(min(_stored_runs(d) for d in dirs), min(batch, cap))
     plan = looks(start, batch, cap)
     level = spend(options.alpha, len(plan))
