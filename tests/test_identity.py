@@ -251,6 +251,26 @@ def test_a_plugin_whose_code_changed_is_recomputed_never_reused_or_pooled(tmp_pa
     assert max(final_errors(tmp_path / "out")) < 400 and len(final_errors(tmp_path / "out")) == 4
 
 
+def test_a_plugin_defined_in_its_package_init_is_its_whole_package(tmp_path):
+    """A method whose ``run`` lives in its package's ``__init__.py`` and reads another module of the package:
+    an edit of that module is noticed (the hash covered only ``__init__.py``, and a stale run was reused; found
+    by a user's audit)."""
+    package = tmp_path / "userland" / "initpkg"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text("from initpkg import core\n\n\ndef run(ctx):\n"
+                                         "    pos = ctx.nav.pos[ctx.updates.imu]\n"
+                                         "    return {'east': pos[:, 0] + core.OFFSET_M, 'north': pos[:, 1]}\n")
+    (package / "core.py").write_text("OFFSET_M = 0.0\n")
+    path = write_sweep(tmp_path / "s.yaml", sweep_dict(runs=2, methods=["initpkg:run"], tables={}))
+    assert plugin_run(tmp_path, path).returncode == 0
+    assert max(final_errors(tmp_path / "out")) < 400
+    (package / "core.py").write_text("OFFSET_M = 1000.0\n")
+    again = plugin_run(tmp_path, path)
+    assert again.returncode == 0, again.stderr
+    assert "recomputing 2 stored run(s) of initpkg:run" in again.stderr
+    assert min(final_errors(tmp_path / "out")) > 400
+
+
 def test_a_plugin_with_a_declared_version_is_reused_until_the_version_changes(tmp_path):
     method = "mine.plug:METHOD"
     path = plugin_sweep(tmp_path, method, offset=0.0, version="1")

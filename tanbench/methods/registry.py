@@ -235,7 +235,7 @@ def source_hash(module_name: str) -> str:
         return "unknown"
     top = sys.modules.get(module_name.split(".", 1)[0])
     top_file = getattr(top, "__file__", None)
-    if top is not module and top_file is not None and Path(top_file).name == "__init__.py":
+    if top_file is not None and Path(top_file).name == "__init__.py":  # a package (its run in __init__.py too)
         root = Path(top_file).parent
         files = sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts)
     else:
