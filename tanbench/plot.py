@@ -23,22 +23,26 @@ from tanbench.results import load, load_series
 from tanbench.sweep import load_results_sweep
 from tanbench.terrain import navigation_map
 
-# colours for methods whose record names none (user methods), in order of appearance
-SPARE_COLORS = ("tab:green", "tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+# colours for methods whose record names none (user methods), in order of appearance, after those no plotted
+# method's record takes (the built-ins take tab:blue, red, orange, green, purple, brown, olive and gray)
+SPARE_COLORS = ("tab:pink", "tab:cyan", "black", "gold", "teal", "navy", "magenta", "lime", "tab:green",
+                "tab:orange", "tab:brown", "tab:olive", "tab:gray")
 
 
 def method_styles(methods) -> dict[str, tuple[str, str]]:
     """(line style, colour) per method: the registry's plot style, spare colours for the rest
-    (and for a user method that cannot be imported where the figures are drawn)."""
-    out, spare = {}, iter(SPARE_COLORS * 4)
+    (and for a user method that cannot be imported where the figures are drawn), never one that
+    a plotted method's record takes while an untaken one is left."""
+    records = {}
     for m in methods:
         try:
-            record = get(m)
+            records[m] = get(m)
         except TanbenchError:
-            out[m] = ("-", next(spare))
-            continue
-        out[m] = (record.linestyle, record.color or next(spare))
-    return out
+            records[m] = None
+    taken = {r.color for r in records.values() if r is not None and r.color}
+    spare = iter([c for c in SPARE_COLORS if c not in taken] + list(SPARE_COLORS) * 4)
+    return {m: ((r.linestyle, r.color) if r is not None and r.color else (r.linestyle if r else "-", next(spare)))
+            for m, r in records.items()}
 
 
 def pyplot():

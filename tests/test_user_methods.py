@@ -189,3 +189,17 @@ def test_methods_command_lists_every_builtin_with_its_options():
     for name in ("tight-dvl", "tight-sbe", "loose-dvl"):
         assert name in proc.stdout
     assert "filter.*" in proc.stdout
+
+
+def test_plugins_never_get_a_plotted_builtins_colour(plugin_dir, monkeypatch):
+    """The docs' example record and the spare colours both drew a plug-in in pmf-dvl's solid green (found by a
+    user's audit): a spare colour is one no plotted method's record takes, while any is left."""
+    from tanbench.methods.registry import get
+    from tanbench.plot import method_styles
+
+    monkeypatch.syspath_prepend(str(plugin_dir))
+    builtins = ["tight-dvl", "tight-sbe", "loose-dvl", "pmf-dvl", "pmf-sbe", "mpf-dvl", "ekf-dvl", "tercom-dvl"]
+    styles = method_styles([*builtins, PF, DR, "no_such_module_xyz:run"])
+    assert len({styles[m] for m in builtins} | {styles[PF], styles[DR], styles["no_such_module_xyz:run"]}) == 11
+    assert styles[PF] == (get(PF).linestyle, get(PF).color)
+    assert len({styles[m][1] for m in styles}) == 11  # every colour its own

@@ -65,4 +65,4 @@ def run(ctx):
 
 
 METHOD = MethodRecord(name="numpy-pf", seed_id=0, run=run, options=Options, summary=run.__doc__,
-                      states=("east", "north"), cost_ns=2000.0, color="tab:green", linestyle="-")
+                      states=("east", "north"), cost_ns=2000.0, color="tab:pink", linestyle="-")

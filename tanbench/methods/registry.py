@@ -208,7 +208,7 @@ def check_plot_style(name: str, record: MethodRecord) -> None:
         return
     if not is_color_like(record.color):
         raise TanbenchError(f"method {name!r}: color {record.color!r} is not a matplotlib colour "
-                            f"(e.g. 'tab:green' or '#1f77b4')")
+                            f"(e.g. 'tab:pink' or '#1f77b4')")
 
 
 def _as_record(name: str, obj, source: str) -> MethodRecord:
