@@ -185,7 +185,9 @@ class ResumeState:
                     "map": "they were made from other map files"}
             notices.append(f"note: recomputing {len(group)} stored run(s) of {method} in {group['cell_id'].nunique()} "
                            f"cell(s): {'; '.join(what[w] for w in why)}" +
-                           (f" (now: {self.codes[method]})" if "code" in why else ""))
+                           (f" (now: {self.codes[method]})" if "code" in why else "") +
+                           ("; a run's task is run whole, so the other methods of those runs are computed again "
+                            "too (to the same results)" if len(self.sweep.spec.methods) > 1 else ""))
         for path, reason in self.damaged:
             what = ("it is rebuilt from the runs' series files, and runs without one are recomputed"
                     if path == store.summary_file(self.out) else "its runs are recomputed")
