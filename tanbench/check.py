@@ -348,7 +348,12 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None, alpha: float
             rows += _rows(scope, _pool(parts, opt, labels), labels, opt, True, opt.seed + len(rows))
     table = pd.DataFrame(rows)
     if table.empty:
-        raise TanbenchError(f"{new_dir} and {base_dir} have no cell and method in common")
+        if cells_new & cells_base:
+            raise TanbenchError(f"{new_dir} and {base_dir} have no method in common in their common cells")
+        differ = [c for c in cols if set(new[c].astype(str)) != set(base[c].astype(str))]
+        hint = (f": their cells differ in {', '.join(differ[:5])}{' and more' if len(differ) > 5 else ''}; to "
+                f"compare across that, give " + " ".join(f"--ignore {c}" for c in differ[:5])) if differ else ""
+        raise TanbenchError(f"{new_dir} and {base_dir} have no cell in common{hint}")
     table = _verdicts(table, opt, opt.alpha if alpha is None else alpha)
     return CheckResult(table=table, only_new=describe(cells_new - cells_base, new),
                        only_baseline=describe(cells_base - cells_new, base),

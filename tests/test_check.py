@@ -152,8 +152,9 @@ def test_ignore_matches_cells_that_differ_only_there(copy_of_baseline):
         return df
 
     rewrite_runs(copy_of_baseline, other_stream)
-    with pytest.raises(TanbenchError, match="no cell and method in common"):
-        compare(copy_of_baseline, BASELINE)
+    with pytest.raises(TanbenchError, match="no cell in common: their cells differ in filter.random_numbers; to "
+                                            "compare across that, give --ignore filter.random_numbers$"):
+        compare(copy_of_baseline, BASELINE)  # the column named, and how to compare across it (a user's audit)
     result = compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("filter.random_numbers",)))
     assert not result.missing and not result.regressed
     assert (result.table["verdict"] != "regressed").all() and len(result.table) == 9 * 5
