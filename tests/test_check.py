@@ -114,6 +114,11 @@ def test_cli_exit_codes_and_report(copy_of_baseline, tmp_path):
         assert bad.exit_code == 1, bad.output
         assert "regressed" in bad.output
     assert pd.read_parquet(tmp_path / "r.parquet")["verdict"].eq("regressed").any()
+    # the .md report keeps 4 significant digits, as the console (it rounded a lost rate of 0.450 to 0.5)
+    table = pd.read_parquet(tmp_path / "r.parquet")
+    md = (tmp_path / "r.md").read_text()
+    values = [v for v in table["new"].dropna() if f"{v:.4g}" != f"{v:.1f}"][:5]
+    assert values and all(f"| {v:.4g} |" in md for v in values)
 
 
 def test_corrupt_parquet_is_one_clear_error(copy_of_baseline, capsys, monkeypatch):
