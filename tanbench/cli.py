@@ -762,9 +762,12 @@ def plot(
                                   help="Only the accuracy-cost figure: mean final error against filter wall "
                                        "time per run, per method and cell."),
 ):
-    from tanbench.plot import plot_frontier, plot_results
+    from tanbench.plot import plot_frontier, plot_results, unstyled_methods
 
     written = [plot_frontier(directory)] if frontier else plot_results(directory, cell)
+    for method in unstyled_methods(directory):
+        typer.echo(f"note: method {method} cannot be imported here: drawn in a spare colour, not its record's "
+                   f"style (put its package on PYTHONPATH)", err=True)
     typer.echo(f"wrote {len(written)} figure(s) under {directory / 'figures'}")
 
 

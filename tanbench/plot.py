@@ -45,6 +45,18 @@ def method_styles(methods) -> dict[str, tuple[str, str]]:
             for m, r in records.items()}
 
 
+def unstyled_methods(directory) -> list[str]:
+    """The methods of ``directory``'s sweep that cannot be imported here: the figures draw them in a spare
+    colour, not in their record's style (``tanbench plot`` says so)."""
+    out = []
+    for m in load_results_sweep(Path(directory)).spec.methods:
+        try:
+            get(m)
+        except TanbenchError:
+            out.append(m)
+    return out
+
+
 def pyplot():
     """matplotlib.pyplot on the Agg backend; one clear error line when matplotlib is missing."""
     try:

@@ -203,3 +203,20 @@ def test_plugins_never_get_a_plotted_builtins_colour(plugin_dir, monkeypatch):
     assert len({styles[m] for m in builtins} | {styles[PF], styles[DR], styles["no_such_module_xyz:run"]}) == 11
     assert styles[PF] == (get(PF).linestyle, get(PF).color)
     assert len({styles[m][1] for m in styles}) == 11  # every colour its own
+
+
+def test_plot_says_which_plugins_it_cannot_style(two_ways, plugin_dir, tmp_path):
+    """Plotted where the plug-ins cannot be imported, their lines fall back to spare colours: `plot` says so,
+    one note per method (it said nothing, and a user's dashed purple method was drawn solid green; found by a
+    user's audit); with the plug-ins importable, no note."""
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(two_ways["local"], out)
+    lost = cli("plot", out, cwd=tmp_path)
+    assert lost.returncode == 0, lost.stderr
+    notes = [line for line in lost.stderr.splitlines() if line.startswith("note: method")]
+    assert sorted(notes) == sorted(f"note: method {m} cannot be imported here: drawn in a spare colour, not its "
+                                   f"record's style (put its package on PYTHONPATH)" for m in (DR, PF))
+    found = cli("plot", out, extra_path=plugin_dir, cwd=tmp_path)
+    assert found.returncode == 0 and "note: method" not in found.stderr, found.stderr
