@@ -45,7 +45,7 @@ META_KEY = b"tanbench"
 
 
 @lru_cache(maxsize=1)
-def _git_revision() -> str:
+def git_revision() -> str:
     """The checkout's short revision ("-dirty" with uncommitted changes outside results/), "" outside a
     git checkout."""
     root = Path(__file__).resolve().parents[1]  # the project root (this file is tanbench/store.py)
@@ -75,7 +75,7 @@ def provenance(sweep_text: str, sweep_name: str, root_seed: int) -> dict:
         "sweep_yaml": sweep_text,
         "root_seed": root_seed,
         "tanbench_version": __version__,
-        "git_revision": _git_revision(),
+        "git_revision": git_revision(),
         "numpy_version": numpy.__version__,
         "numba_version": numba.__version__,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

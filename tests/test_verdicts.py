@@ -259,3 +259,30 @@ def test_until_decisive_refuses_a_baseline_its_code_would_recompute(tmp_path):
     lines = error_lines(proc.stderr)
     assert len(lines) == 1 and "would be recomputed by the code here" in lines[0] and "plugx.m:run (code)" in lines[0]
     assert sorted((p, p.stat().st_mtime_ns) for p in (tmp_path / "base" / "runs").rglob("*.parquet")) == before
+
+
+def test_until_decisive_refuses_a_baseline_another_revision_made(tmp_path):
+    """Built-ins have no code identity of their own: a baseline made by another revision of the code would be
+    extended with this code's runs (a reviewer reproduced it with a bug put into tight-dvl). Refused, naming
+    the revisions; the directory is left as it was."""
+    import pyarrow.parquet as pq
+
+    from tanbench.runner.engine import run_sweep
+    from tanbench.runner.sequential import until_decisive
+    from tanbench.sweep import parse_sweep
+
+    if not store.git_revision():
+        pytest.skip("not a git checkout: the revision is unknown")
+    dirs = []
+    for name in ("new", "base"):
+        d = tmp_path / name
+        run_sweep(parse_sweep(SMALL % "", "s.yaml"), d, workers=1, series="none", progress=False,
+                  echo=lambda *_: None, note=lambda *_: None)
+        dirs.append(d)
+    for path in store.run_files(dirs[1]):
+        meta = store.read_meta(path)
+        store.write_parquet(pq.read_table(path).to_pandas(), path, {**meta, "git_revision": "abc1234"})
+    before = sorted((p, p.stat().st_mtime_ns) for p in (dirs[1] / "runs").rglob("*.parquet"))
+    with pytest.raises(TanbenchError, match=f"made by code revision abc1234, and this is {store.git_revision()}"):
+        until_decisive(dirs[0], dirs[1], CheckOptions(min_runs=2), batch=4, cap=8, echo=lambda *_: None)
+    assert sorted((p, p.stat().st_mtime_ns) for p in (dirs[1] / "runs").rglob("*.parquet")) == before

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from tanbench import store
 from tanbench.check import CheckOptions, CheckResult, compare, looks, spend
 from tanbench.errors import TanbenchError
 from tanbench.results import load
@@ -30,10 +31,19 @@ def _stored_runs(directory: Path) -> int:
     return int(runs.groupby(["cell_id", "method"])["run"].nunique().min())
 
 
-def _check_nothing_stale(sweep, directory: Path) -> None:
-    """Refuse to extend a directory whose stored runs would come out differently now (another method code,
-    e.g. a plug-in edited since, or other seeds or map): extending would recompute them, and a baseline would
-    silently become the new code's (found by a user's audit: the check then compared a bug with itself)."""
+def _check_extendable(sweep, directory: Path) -> None:
+    """Refuse to extend a directory whose stored runs another code made: the runs added would be this code's,
+    and a baseline would silently become the new code's (found by a user's audit: the check then compared a bug
+    with itself). A user method's stored runs of other code are stale (they would be recomputed); the built-ins
+    carry no code identity of their own, so their runs are judged by the revision of the checkout that made them
+    (``git_revision`` in the run files; unknown outside a git checkout, and a dirty tree's changes are not told
+    apart)."""
+    here = store.git_revision()
+    made = {store.read_meta(p).get("git_revision") or "" for p in store.run_files(directory)} - {""}
+    if here and made - {here}:
+        raise TanbenchError(f"{directory}: its runs were made by code revision {', '.join(sorted(made))}, and this "
+                            f"is {here}: the runs --until-decisive adds would be this code's, not that code's; make "
+                            f"both directories with one code (e.g. rerun it here), or check without --until-decisive")
     stale = ResumeState.read(sweep, directory, "none").stale()
     if len(stale):
         why = ", ".join(f"{method} ({', '.join(sorted(set(group['stale'])))})"
@@ -52,7 +62,7 @@ def until_decisive(new_dir, base_dir, options: CheckOptions, batch: int, cap: in
             raise TanbenchError(f"{d}: no sweep.yaml; --until-decisive extends a directory with its own sweep")
         sweeps.append(load_sweep(d / "sweep.yaml"))
     for sweep, d in zip(sweeps, dirs):
-        _check_nothing_stale(sweep, d)
+        _check_extendable(sweep, d)
     start = max(min(_stored_runs(d) for d in dirs), min(batch, cap))
     plan = looks(start, batch, cap)
     level = spend(options.alpha, len(plan))
