@@ -128,15 +128,22 @@ def _scenario_columns(a: pd.DataFrame, b: pd.DataFrame) -> list[str]:
     return sorted((set(a.columns) & set(b.columns)) - RESULT_COLUMNS - {NEES_METRIC[1]})
 
 
-def _cell_keys(runs: pd.DataFrame, cols: list[str]) -> pd.Series:
-    def norm(v):
-        if isinstance(v, (float, np.floating)) and float(v).is_integer():
-            return int(v)
-        if isinstance(v, np.generic):
-            return v.item()
-        return v
+def _key_value(v):
+    """A scenario value as cells are matched on it: 10.0 is 10, numpy scalars plain."""
+    if isinstance(v, (float, np.floating)) and float(v).is_integer():
+        return int(v)
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
 
-    return runs[cols].apply(lambda r: json.dumps([norm(v) for v in r], default=str), axis=1)
+
+def _cell_keys(runs: pd.DataFrame, cols: list[str]) -> pd.Series:
+    return runs[cols].apply(lambda r: json.dumps([_key_value(v) for v in r], default=str), axis=1)
+
+
+def _values(runs: pd.DataFrame, col: str) -> set[str]:
+    """The values of a scenario column as :func:`_cell_keys` matches them."""
+    return {json.dumps(_key_value(v), default=str) for v in runs[col]}
 
 
 def _label(row: pd.Series) -> str:
@@ -350,7 +357,7 @@ def compare(new_dir, base_dir, options: CheckOptions | None = None, alpha: float
     if table.empty:
         if cells_new & cells_base:
             raise TanbenchError(f"{new_dir} and {base_dir} have no method in common in their common cells")
-        differ = [c for c in cols if set(new[c].astype(str)) != set(base[c].astype(str))]
+        differ = [c for c in cols if _values(new, c) != _values(base, c)]
         hint = (f": their cells differ in {', '.join(differ[:5])}{' and more' if len(differ) > 5 else ''}; to "
                 f"compare across that, give " + " ".join(f"--ignore {c}" for c in differ[:5])) if differ else ""
         raise TanbenchError(f"{new_dir} and {base_dir} have no cell in common{hint}")
@@ -429,7 +436,7 @@ def write_report(result: CheckResult, path: Path) -> None:
             result.table.to_parquet(path, index=False)
         elif suffix == ".md":
             extra = "".join(f"\n* missing: {line}" for line in result.missing)
-            shown = result.table.copy()  # 4 significant digits, as the console: a lost rate of 0.450 is not 0.5
+            shown = result.table.copy()  # 4 significant digits (a lost rate of 0.450 is not 0.5)
             for c in shown.columns[shown.dtypes.apply(lambda t: t.kind == "f")]:
                 shown[c] = [("-" if np.isnan(v) else f"{v:.4g}") for v in shown[c]]
             path.write_text(to_markdown(shown, title="tanbench check") + extra + "\n")
