@@ -271,6 +271,24 @@ def test_a_plugin_defined_in_its_package_init_is_its_whole_package(tmp_path):
     assert min(final_errors(tmp_path / "out")) > 400
 
 
+def test_a_plugin_in_a_namespace_package_is_its_regular_package(tmp_path):
+    """Under a namespace package (no __init__.py of its own) the method's regular package is what identifies it:
+    an edit of a module beside its __init__.py is noticed (found by the review)."""
+    package = tmp_path / "userland" / "nsroot" / "sub"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text("from nsroot.sub import core\n\n\ndef run(ctx):\n"
+                                         "    pos = ctx.nav.pos[ctx.updates.imu]\n"
+                                         "    return {'east': pos[:, 0] + core.OFFSET_M, 'north': pos[:, 1]}\n")
+    (package / "core.py").write_text("OFFSET_M = 0.0\n")
+    path = write_sweep(tmp_path / "s.yaml", sweep_dict(runs=2, methods=["nsroot.sub:run"], tables={}))
+    assert plugin_run(tmp_path, path).returncode == 0
+    (package / "core.py").write_text("OFFSET_M = 1000.0\n")
+    again = plugin_run(tmp_path, path)
+    assert again.returncode == 0, again.stderr
+    assert "recomputing 2 stored run(s) of nsroot.sub:run" in again.stderr
+    assert min(final_errors(tmp_path / "out")) > 400
+
+
 def test_a_plugin_with_a_declared_version_is_reused_until_the_version_changes(tmp_path):
     method = "mine.plug:METHOD"
     path = plugin_sweep(tmp_path, method, offset=0.0, version="1")

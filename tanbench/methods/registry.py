@@ -233,10 +233,13 @@ def source_hash(module_name: str) -> str:
     path = getattr(module, "__file__", None)
     if path is None:
         return "unknown"
-    top = sys.modules.get(module_name.split(".", 1)[0])
-    top_file = getattr(top, "__file__", None)
-    if top_file is not None and Path(top_file).name == "__init__.py":  # a package (its run in __init__.py too)
-        root = Path(top_file).parent
+    # the outermost regular package holding the module (its run may be in that package's __init__.py; above it
+    # may be a namespace package, which has no file of its own), else the module's own file
+    parts = module_name.split(".")
+    packages = (getattr(sys.modules.get(".".join(parts[:i])), "__file__", None) for i in range(1, len(parts) + 1))
+    package = next((Path(f) for f in packages if f is not None and Path(f).name == "__init__.py"), None)
+    if package is not None:
+        root = package.parent
         files = sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts)
     else:
         root, files = Path(path).parent, [Path(path)]
