@@ -48,8 +48,12 @@ def method_styles(methods) -> dict[str, tuple[str, str]]:
 def unstyled_methods(directory) -> list[str]:
     """The methods of ``directory``'s sweep that cannot be imported here: the figures draw them in a spare
     colour, not in their record's style (``tanbench plot`` says so)."""
+    try:
+        methods = load_results_sweep(Path(directory)).spec.methods
+    except TanbenchError:  # --frontier draws from the runs alone: so do its notes
+        methods = sorted(set(load(directory)["method"]))
     out = []
-    for m in load_results_sweep(Path(directory)).spec.methods:
+    for m in methods:
         try:
             get(m)
         except TanbenchError:

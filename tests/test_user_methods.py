@@ -220,3 +220,6 @@ def test_plot_says_which_plugins_it_cannot_style(two_ways, plugin_dir, tmp_path)
                                    f"record's style (put its package on PYTHONPATH)" for m in (DR, PF))
     found = cli("plot", out, extra_path=plugin_dir, cwd=tmp_path)
     assert found.returncode == 0 and "note: method" not in found.stderr, found.stderr
+    (out / "sweep.yaml").unlink()  # --frontier draws from the runs alone, and still does (found by the review)
+    frontier = cli("plot", out, "--frontier", cwd=tmp_path)
+    assert frontier.returncode == 0 and frontier.stderr.count("note: method") == 2, frontier.stderr
