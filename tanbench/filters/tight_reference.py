@@ -110,9 +110,9 @@ def check_not_wound(k, *angles):
     directions (``trig.wound_angle``), which the loop references do not follow."""
     for values, reference in angles:
         if not (np.abs(np.asarray(values) - reference) < WOUND / 2.0).all():
-            raise ValueError(f"update {k}: a particle's attitude is wound (or NaN) beyond WOUND / 2 from the "
-                             "navigation's; the kernels then take pseudo-random directions, which this reference "
-                             "does not follow")
+            raise ValueError(f"update {k}: a particle's attitude is wound (or NaN) beyond WOUND / 2 from its "
+                             "reference (the navigation's, or the loose loop's corrected heading); the kernels then "
+                             "take pseudo-random directions, which this reference does not follow")
 
 
 def block_normals(rng, rows, m):
