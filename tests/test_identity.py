@@ -251,41 +251,25 @@ def test_a_plugin_whose_code_changed_is_recomputed_never_reused_or_pooled(tmp_pa
     assert max(final_errors(tmp_path / "out")) < 400 and len(final_errors(tmp_path / "out")) == 4
 
 
-def test_a_plugin_defined_in_its_package_init_is_its_whole_package(tmp_path):
+@pytest.mark.parametrize("package", ["initpkg", "nsroot.sub"])
+def test_a_plugin_defined_in_its_package_init_is_its_whole_package(tmp_path, package):
     """A method whose ``run`` lives in its package's ``__init__.py`` and reads another module of the package:
-    an edit of that module is noticed (the hash covered only ``__init__.py``, and a stale run was reused; found
-    by a user's audit)."""
-    package = tmp_path / "userland" / "initpkg"
-    package.mkdir(parents=True)
-    (package / "__init__.py").write_text("from initpkg import core\n\n\ndef run(ctx):\n"
-                                         "    pos = ctx.nav.pos[ctx.updates.imu]\n"
-                                         "    return {'east': pos[:, 0] + core.OFFSET_M, 'north': pos[:, 1]}\n")
-    (package / "core.py").write_text("OFFSET_M = 0.0\n")
-    path = write_sweep(tmp_path / "s.yaml", sweep_dict(runs=2, methods=["initpkg:run"], tables={}))
+    an edit of that module is noticed. The hash covered only ``__init__.py``, and a stale run was reused (found
+    by a user's audit); under a namespace package (``nsroot``, no __init__.py of its own), only the module's file
+    (found by the review)."""
+    folder = tmp_path / "userland" / package.replace(".", "/")
+    folder.mkdir(parents=True)
+    (folder / "__init__.py").write_text(f"from {package} import core\n\n\ndef run(ctx):\n"
+                                        "    pos = ctx.nav.pos[ctx.updates.imu]\n"
+                                        "    return {'east': pos[:, 0] + core.OFFSET_M, 'north': pos[:, 1]}\n")
+    (folder / "core.py").write_text("OFFSET_M = 0.0\n")
+    path = write_sweep(tmp_path / "s.yaml", sweep_dict(runs=2, methods=[f"{package}:run"], tables={}))
     assert plugin_run(tmp_path, path).returncode == 0
     assert max(final_errors(tmp_path / "out")) < 400
-    (package / "core.py").write_text("OFFSET_M = 1000.0\n")
+    (folder / "core.py").write_text("OFFSET_M = 1000.0\n")
     again = plugin_run(tmp_path, path)
     assert again.returncode == 0, again.stderr
-    assert "recomputing 2 stored run(s) of initpkg:run" in again.stderr
-    assert min(final_errors(tmp_path / "out")) > 400
-
-
-def test_a_plugin_in_a_namespace_package_is_its_regular_package(tmp_path):
-    """Under a namespace package (no __init__.py of its own) the method's regular package is what identifies it:
-    an edit of a module beside its __init__.py is noticed (found by the review)."""
-    package = tmp_path / "userland" / "nsroot" / "sub"
-    package.mkdir(parents=True)
-    (package / "__init__.py").write_text("from nsroot.sub import core\n\n\ndef run(ctx):\n"
-                                         "    pos = ctx.nav.pos[ctx.updates.imu]\n"
-                                         "    return {'east': pos[:, 0] + core.OFFSET_M, 'north': pos[:, 1]}\n")
-    (package / "core.py").write_text("OFFSET_M = 0.0\n")
-    path = write_sweep(tmp_path / "s.yaml", sweep_dict(runs=2, methods=["nsroot.sub:run"], tables={}))
-    assert plugin_run(tmp_path, path).returncode == 0
-    (package / "core.py").write_text("OFFSET_M = 1000.0\n")
-    again = plugin_run(tmp_path, path)
-    assert again.returncode == 0, again.stderr
-    assert "recomputing 2 stored run(s) of nsroot.sub:run" in again.stderr
+    assert f"recomputing 2 stored run(s) of {package}:run" in again.stderr
     assert min(final_errors(tmp_path / "out")) > 400
 
 
