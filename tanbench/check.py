@@ -383,7 +383,8 @@ def _num(v: float, rate: bool) -> str:
 def render(result: CheckResult) -> str:
     """The compact text table `tanbench check` prints: decisive rows first."""
     t = result.table
-    lines = [f"{'verdict':13s} {'method':10s} {'metric':13s} {'baseline':>9s} {'new':>9s} {'change':>8s} "
+    w = max([10, *(len(m) for m in t["method"])])  # a plug-in's long name widens the column, not the row
+    lines = [f"{'verdict':13s} {'method':{w}s} {'metric':13s} {'baseline':>9s} {'new':>9s} {'change':>8s} "
              f"{'95% CI':>17s} {'margin':>7s} {'MDE':>7s} {'p(worse)':>9s} {'p(better)':>9s}  scope"]
     for role in ("decisive", "info"):
         part = t[t["role"] == role]
@@ -394,7 +395,7 @@ def render(result: CheckResult) -> str:
         for _, r in part.iterrows():
             rate = r["statistic"] == "rate"
             ci = f"[{_num(r['ci95_low'], rate):>7s},{_num(r['ci95_high'], rate):>7s}]"
-            lines.append(f"{r['verdict']:13s} {r['method']:10s} {r['metric']:13s} {_num(r['baseline'], rate):>9s} "
+            lines.append(f"{r['verdict']:13s} {r['method']:{w}s} {r['metric']:13s} {_num(r['baseline'], rate):>9s} "
                          f"{_num(r['new'], rate):>9s} {('+' if r['change'] >= 0 else '') + _num(r['change'], rate):>8s} "
                          f"{ci:>17s} {_num(r['margin'], rate):>7s} {_num(r['mde'], rate):>7s} "
                          f"{r['p_worse_holm']:9.2g} {r['p_better_holm']:9.2g}  {r['cell']}"

@@ -169,3 +169,17 @@ def test_ignore_matches_cells_that_differ_only_there(copy_of_baseline):
     assert (result.table["verdict"] != "regressed").all() and len(result.table) == 9 * 5
     with pytest.raises(TanbenchError, match="--ignore filter.no_such_option: not a scenario column"):
         compare(copy_of_baseline, BASELINE, CheckOptions(ignore=("filter.no_such_option",)))
+
+
+def test_the_console_table_keeps_its_columns_for_long_method_names(copy_of_baseline):
+    """A plug-in's long name pushed its row's columns out of line with the header (found by a user's audit)."""
+    from tanbench.check import render
+
+    rewrite_runs(copy_of_baseline, lambda df, cell: df.assign(method=df["method"].str.replace(
+        "loose-dvl", "my_filters.pf:METHOD")))
+    result = compare(copy_of_baseline, copy_of_baseline)
+    lines = render(result).splitlines()
+    rows = [line for line in lines if line.startswith(("unchanged", "regressed", "improved", "underpowered"))]
+    assert any("my_filters.pf:METHOD" in line for line in rows)
+    metric_at = lines[0].index("metric")
+    assert all(line[metric_at - 1] == " " and line[metric_at] != " " for line in rows)
