@@ -286,11 +286,7 @@ def check_no_holes(tmap, t, e, n, fill: str, track: str = "the track", margin: f
     map is the caller's to say). Both the sweep's worlds (:func:`check_track_on_map`: the true track, no margin) and
     ``tanbench replay`` (the navigation solution, the filter's initial uncertainty around it:
     ``missions/observe.py``) refuse holes with it."""
-    if margin > 0:
-        hole = over_holes(tmap, e, n, margin)
-    else:  # the look-up itself (over_holes' boxes divide by the spacing where it multiplies by its inverse)
-        e, n = np.asarray(e, dtype=float), np.asarray(n, dtype=float)
-        hole = np.isnan(tmap.elevation(e, n)) & tmap.contains(e, n)
+    hole = over_holes(tmap, e, n, margin)
     if hole.any():
         k = int(np.argmax(hole))
         where = ""

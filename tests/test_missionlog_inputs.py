@@ -325,9 +325,9 @@ def test_the_hole_check_reads_the_navigation_solution_not_the_reference(base, tm
 
 def test_the_hole_check_is_the_sweep_s_without_a_margin():
     """One piece of code: without a margin the check is the bilinear look-up's NaN itself, on node lines too
-    (over_holes' boxes divide by the spacing where the look-up multiplies by its inverse, so on a node line the
-    two can pick neighbouring cells; found by the review), and over_holes agrees with it off them; with a margin
-    over_holes says which points find_holes would find a hole around."""
+    (over_holes' boxes once divided by the spacing where the look-up multiplies by its inverse, so on a node line
+    the two could pick neighbouring cells; found by the review); with a margin over_holes says which points
+    find_holes would find a hole around."""
     from tanbench.simulation import check_no_holes
     from tanbench.terrain.grid import Map
     from tanbench.terrain.mosaic import find_holes, over_holes

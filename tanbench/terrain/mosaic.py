@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from tanbench.errors import TanbenchError
-from tanbench.terrain.grid import Map
+from tanbench.terrain.grid import EDGE_TOL, Map
 
 # Positions that differ from the mosaic grid by less than this fraction of a cell are "on" it.
 MOSAIC_TOLERANCE = 0.05
@@ -167,12 +167,13 @@ def _look_up_boxes(grid: Map, e, n, margin: float):
     e, n = np.broadcast_arrays(np.asarray(e, dtype=float), np.asarray(n, dtype=float))
     e, n = e.ravel(), n.ravel()
     ny, nx = grid.z.shape
-    fx_lo = (e - margin - grid.e0) / grid.res_e
-    fx_hi = (e + margin - grid.e0) / grid.res_e
-    fy_lo = (n - margin - grid.n0) / grid.res_n
-    fy_hi = (n + margin - grid.n0) / grid.res_n
-    keep = (np.isfinite(e) & np.isfinite(n) & (fx_hi >= 0) & (fx_lo <= nx - 1)
-            & (fy_hi >= 0) & (fy_lo <= ny - 1))
+    _, e0, n0, inv_re, inv_rn = grid.kernel_args()  # the look-up's own arithmetic (grid.bilinear_cell), so that
+    fx_lo = (e - margin - e0) * inv_re  # a point on a node line falls in the cell the look-up reads
+    fx_hi = (e + margin - e0) * inv_re
+    fy_lo = (n - margin - n0) * inv_rn
+    fy_hi = (n + margin - n0) * inv_rn
+    keep = (np.isfinite(e) & np.isfinite(n) & (fx_hi >= 0) & (fx_lo <= nx - 1 + EDGE_TOL)
+            & (fy_hi >= 0) & (fy_lo <= ny - 1 + EDGE_TOL))
     j_lo = np.clip(np.floor(fx_lo[keep]), 0, nx - 2).astype(np.int64)
     j_hi = np.clip(np.floor(fx_hi[keep]), 0, nx - 2).astype(np.int64) + 1
     i_lo = np.clip(np.floor(fy_lo[keep]), 0, ny - 2).astype(np.int64)
