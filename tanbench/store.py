@@ -256,7 +256,7 @@ MERGED_RUNS = "runs.parquet"
 TERRAIN_META = "terrain_sha256"
 CODE_META = "method_code"
 IDENTITY_COLUMNS = ["run", "method", "seed", "filter_seed", "status", "sweep"]
-RUN_INDEX_COLUMNS = ["cell_id", *IDENTITY_COLUMNS, "terrain", "code", "root_seed", "path", "mtime"]
+RUN_INDEX_COLUMNS = ["cell_id", *IDENTITY_COLUMNS, "terrain", "code", "root_seed", "git_revision", "path", "mtime"]
 
 
 def read_run_index(out: Path) -> tuple[pd.DataFrame, list[tuple[Path, str]]]:
@@ -265,7 +265,7 @@ def read_run_index(out: Path) -> tuple[pd.DataFrame, list[tuple[Path, str]]]:
 
     Columns: cell_id, the :data:`IDENTITY_COLUMNS`, ``terrain`` (the file's map hash or
     None), ``code`` (the method's code identity in the file, None if not recorded),
-    ``root_seed``, ``path`` and ``mtime``. A row stored twice (a merged file and a task
+    ``root_seed``, ``git_revision`` (of the checkout that wrote the file, "" if unknown), ``path`` and ``mtime``. A row stored twice (a merged file and a task
     file written since) is kept once, the newer. A file of another schema or not written
     by tanbench is an error (:func:`read_meta`); an unreadable one is listed with why.
     """
@@ -284,6 +284,7 @@ def read_run_index(out: Path) -> tuple[pd.DataFrame, list[tuple[Path, str]]]:
         df["terrain"] = meta.get(TERRAIN_META)
         df["code"] = df["method"].map(lambda m, codes=codes: codes.get(m))
         df["root_seed"] = meta.get("root_seed")
+        df["git_revision"] = meta.get("git_revision") or ""
         df["path"] = str(path)
         df["mtime"] = path.stat().st_mtime
         frames.append(df)

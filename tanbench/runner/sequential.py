@@ -36,15 +36,16 @@ def _check_extendable(sweep, directory: Path) -> None:
     and a baseline would silently become the new code's (found by a user's audit: the check then compared a bug
     with itself). A user method's stored runs of other code are stale (they would be recomputed); the built-ins
     carry no code identity of their own, so their runs are judged by the revision of the checkout that made them
-    (``git_revision`` in the run files; unknown outside a git checkout, and a dirty tree's changes are not told
-    apart)."""
+    (``git_revision`` in the run files, read with the run index; unknown outside a git checkout, and a dirty
+    tree's changes are not told apart)."""
+    state = ResumeState.read(sweep, directory, "none")
     here = store.git_revision()
-    made = {store.read_meta(p).get("git_revision") or "" for p in store.run_files(directory)} - {""}
+    made = set(state.rows["git_revision"].dropna()) - {""}
     if here and made - {here}:
         raise TanbenchError(f"{directory}: its runs were made by code revision {', '.join(sorted(made))}, and this "
                             f"is {here}: the runs --until-decisive adds would be this code's, not that code's; make "
                             f"both directories with one code (e.g. rerun it here), or check without --until-decisive")
-    stale = ResumeState.read(sweep, directory, "none").stale()
+    stale = state.stale()
     if len(stale):
         why = ", ".join(f"{method} ({', '.join(sorted(set(group['stale'])))})"
                         for method, group in stale.groupby("method"))
