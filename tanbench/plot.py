@@ -29,16 +29,22 @@ SPARE_COLORS = ("tab:pink", "tab:cyan", "black", "gold", "teal", "navy", "magent
                 "tab:orange", "tab:brown", "tab:olive", "tab:gray")
 
 
-def method_styles(methods) -> dict[str, tuple[str, str]]:
-    """(line style, colour) per method: the registry's plot style, spare colours for the rest
-    (and for a user method that cannot be imported where the figures are drawn), never one that
-    a plotted method's record takes while an untaken one is left."""
+def _records(methods) -> dict:
+    """Each method's registry record, or None where it cannot be imported here."""
     records = {}
     for m in methods:
         try:
             records[m] = get(m)
         except TanbenchError:
             records[m] = None
+    return records
+
+
+def method_styles(methods) -> dict[str, tuple[str, str]]:
+    """(line style, colour) per method: the registry's plot style, spare colours for the rest
+    (and for a user method that cannot be imported where the figures are drawn), never one that
+    a plotted method's record takes while an untaken one is left."""
+    records = _records(methods)
     taken = {r.color for r in records.values() if r is not None and r.color}
     spare = iter([c for c in SPARE_COLORS if c not in taken] + list(SPARE_COLORS) * 4)
     return {m: ((r.linestyle, r.color) if r is not None and r.color else (r.linestyle if r else "-", next(spare)))
@@ -52,13 +58,7 @@ def unstyled_methods(directory) -> list[str]:
         methods = load_results_sweep(Path(directory)).spec.methods
     except TanbenchError:  # --frontier draws from the runs alone: so do its notes
         methods = sorted(set(load(directory)["method"]))
-    out = []
-    for m in methods:
-        try:
-            get(m)
-        except TanbenchError:
-            out.append(m)
-    return out
+    return [m for m, record in _records(methods).items() if record is None]
 
 
 def pyplot():
