@@ -119,6 +119,9 @@ def _short_repr(value, limit: int = 80) -> str:
     return text if len(text) <= limit else f"{text[:limit - 20]}... ({len(text)} characters)"
 
 
+MAX_PROBLEMS = 5  # named in one validation error line; the rest are counted
+
+
 def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
     """Every pydantic error of a spec (the first MAX_PROBLEMS) as one line: 'key.path: message (got value); ...'."""
     errors = exc.errors()
@@ -128,8 +131,6 @@ def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
         parts.append(f"and {more} more problem{'s' if more > 1 else ''}")
     return "; ".join(parts)
 
-
-MAX_PROBLEMS = 5  # named in one validation error line; the rest are counted
 
 
 def _format_problem(err: dict, prefix: str) -> str:

@@ -36,8 +36,8 @@ SIMULATION_S = 0.022  # one run's vehicle data (1190 s at 100 Hz; the world's ra
 # errors), then each method family's kernels (a family: the methods named FAMILY-sensor, which run the same
 # kernels with the same types; the first, tight, includes the random numbers, resampling, propagation and
 # likelihood passes the later ones reuse). A sweep compiles only the families it names.
-# tight and loose until 5 Dec 2026 (replaced below): the values measured after issue 27's first compile cuts (3 Dec 2026, load 1.7-6:
-# tight 54.0, loose after it 27.4, loose alone 55.7) times the ratio new/old of cold compiles of the code
+# tight and loose until 5 Dec 2026 (replaced below): the values measured after issue 27's first compile cuts
+# (3 Dec 2026, load 1.7-6: tight 54.0, loose after it 27.4, loose alone 55.7) times the ratio new/old of cold compiles of the code
 # before and after the rare variants were made lazy, old and new compiled side by side on a loaded machine
 # (3 Dec 2026, docs/speed.md "3 December, fifth session"): tight 0.77 (2 pairs: 0.768, 0.778), loose after
 # tight 0.86 (0.829, 0.883), loose alone 0.81 (1 pair). pmf, mpf, ekf and tercom: measured again on 3 Dec 2026
@@ -45,9 +45,8 @@ SIMULATION_S = 0.022  # one run's vehicle data (1190 s at 100 Hz; the world's ra
 # the tight family: 15.32, 11.68, 7.78 and 4.67 s of thread CPU on that VM, over its speed factor 0.481.
 # The simulation, tight and loose measured again on 5 Dec 2026 (nineteenth session, docs/speed.md; the likely cause
 # of the change, not measured apart: the tight loop's tempering and adaptive-count paths, loose-dvl's gates): one
-# process on an empty
-# cache, thread CPU over the machine's speed factor (0.48-0.50), /work/notes/s19/compile_seq.py: the simulation 7.6,
-# 7.4, 7.0; tight 64.1, 62.4; loose after tight 29.7, 29.5; loose alone 64.4 (after the simulation).
+# process on an empty cache, thread CPU over the machine's speed factor (0.48-0.50): the simulation 7.6, 7.4, 7.0;
+# tight 64.1, 62.4; loose after tight 29.7, 29.5; loose alone 64.4 (after the simulation).
 COMPILE_SHARED_S = 7.3
 COMPILE_FAMILY_S = {"tight": 63.3, "loose": 29.6, "pmf": 31.8, "mpf": 24.3, "ekf": 16.2, "tercom": 9.7}
 # a family compiled in a process without the family whose kernels it reuses (a side-by-side helper):
