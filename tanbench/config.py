@@ -132,7 +132,6 @@ def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
     return "; ".join(parts)
 
 
-
 def _format_problem(err: dict, prefix: str) -> str:
     """One pydantic error as 'key.path: message (got value)'."""
     loc = ".".join(str(p) for p in err["loc"])
